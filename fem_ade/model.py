@@ -1,0 +1,181 @@
+"""The model's parameters, the names of its effects, and their validation (SPEC §1, §2, §4).
+
+Everything here is backend-agnostic: both the finite-element backend and the spectral
+reference read a :class:`Params` and switch terms on and off by :attr:`Params.effects`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields, replace
+
+#: The energy terms a scene can switch on (SPEC §2). ``bending`` is always on.
+EFFECTS = ("bending", "spontaneous_curvature", "ade", "volume", "area")
+
+#: Columns every backend reports, in this order (SPEC §6).
+HISTORY_COLUMNS = ("step", "t", "E", "W", "G", "V", "A", "dA")
+
+SQRT2 = math.sqrt(2.0)
+#: A = AREA_FACTOR * B  (SPEC §2)
+AREA_FACTOR = 3.0 * SQRT2 / 4.0
+
+
+class ModelError(ValueError):
+    """Invalid model input: a parameter, a scene or a scene file. The message is one line."""
+
+
+@dataclass(frozen=True)
+class Params:
+    """Physical and numerical parameters of one simulation (SPEC §1).
+
+    ``D`` defaults to 2ε/3 and ``A0`` (the area scale of G) to β. A term is evaluated only
+    when its effect is in ``effects``; ``C`` is used only with ``spontaneous_curvature``.
+    """
+
+    eps: float
+    alpha: float
+    beta: float
+    delta_A0: float = 0.0
+    kappa: float = 1.0
+    kappa_bar: float = 1.4
+    C: float = 0.0
+    D: float | None = None
+    M1: float = 1e5
+    M2: float = 1e4
+    A0: float | None = None
+    L: float = 1.0
+    effects: frozenset[str] = field(
+        default_factory=lambda: frozenset({"bending", "ade", "volume", "area"})
+    )
+
+    def __post_init__(self):
+        object.__setattr__(self, "effects", frozenset(self.effects))
+        if self.D is None:
+            object.__setattr__(self, "D", 2.0 * self.eps / 3.0)
+        if self.A0 is None:
+            object.__setattr__(self, "A0", self.beta)
+
+    # -- effects -----------------------------------------------------------------------
+    def on(self, effect: str) -> bool:
+        """True if ``effect`` (one of :data:`EFFECTS`) is switched on."""
+        if effect not in EFFECTS:
+            raise KeyError(f"unknown effect {effect!r}; valid: {', '.join(EFFECTS)}")
+        return effect in self.effects
+
+    @property
+    def C_eff(self) -> float:
+        """C as the bending term sees it: 0 unless ``spontaneous_curvature`` is on."""
+        return self.C if "spontaneous_curvature" in self.effects else 0.0
+
+    # -- checks ------------------------------------------------------------------------
+    def validate(self) -> Params:
+        """Raise :class:`ModelError` with one clear line if a parameter is unusable."""
+        unknown = set(self.effects) - set(EFFECTS)
+        if unknown:
+            raise ModelError(
+                f"unknown effect(s) {sorted(unknown)}; valid effects: {', '.join(EFFECTS)}"
+            )
+        if "bending" not in self.effects:
+            raise ModelError("the 'bending' effect is always on for a vesicle; add it to effects")
+        for name in ("eps", "kappa", "L"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ModelError(f"{name} must be a positive number, got {value}")
+        for name in ("alpha", "beta"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ModelError(
+                    f"{name} must be positive (it is the target "
+                    f"{'volume' if name == 'alpha' else 'area'}), got {value}"
+                )
+        if self.on("ade"):
+            if not (math.isfinite(self.kappa_bar) and self.kappa_bar >= 0):
+                raise ModelError(f"kappa_bar must be >= 0, got {self.kappa_bar}")
+            for name in ("D", "A0"):
+                value = getattr(self, name)
+                if not (math.isfinite(value) and value > 0):
+                    raise ModelError(f"{name} must be positive when 'ade' is on, got {value}")
+        for name in ("M1", "M2"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ModelError(f"{name} must be a non-negative penalty, got {value}")
+        if self.C != 0.0 and not self.on("spontaneous_curvature"):
+            raise ModelError(
+                f"C = {self.C} is set but the 'spontaneous_curvature' effect is off; "
+                "add it to effects"
+            )
+        return self
+
+    def with_(self, **changes) -> Params:
+        """A copy with some fields changed (D and A0 are re-derived if they were derived)."""
+        return replace(self, **changes)
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d["effects"] = sorted(self.effects, key=EFFECTS.index)
+        return d
+
+
+PARAM_FIELDS = {f.name for f in fields(Params)}
+
+
+def max_stable_dt(params: Params) -> float:
+    """ε³/κ: beyond it the step operator 1 + Δtκ(ε|k|⁴ − (2/ε)|k|²) is singular (SPEC §4)."""
+    return params.eps**3 / params.kappa
+
+
+def check_resolution(params: Params, n: int, dt: float, *, allow_underresolved: bool = False):
+    """Check the grid size n and the time step dt against the scene (SPEC §4). Raises ModelError."""
+    if not isinstance(n, int) or n < 8:
+        raise ModelError(f"n must be an integer >= 8, got {n}")
+    if not (math.isfinite(dt) and dt > 0):
+        raise ModelError(f"the time step must be positive, got dt = {dt}")
+    limit = max_stable_dt(params)
+    if dt >= limit:
+        raise ModelError(
+            f"dt = {dt:g} >= eps^3/kappa = {limit:g}: the semi-implicit step operator is singular "
+            "there (SPEC §4); use a smaller dt"
+        )
+    h = params.L / n
+    if h > params.eps and not allow_underresolved:
+        raise ModelError(
+            f"grid too coarse for the interface: h = L/n = {h:.4g} > eps = {params.eps:g}; "
+            f"use n >= {math.ceil(params.L / params.eps)} or --allow-underresolved"
+        )
+
+
+def explicit_area_dt_bound(params: Params, A: float) -> tuple[float, float]:
+    """The area penalty's explicit diffusion and the largest Δt the paper's scheme tolerates.
+
+    The explicit term (3√2/2) M₂ (A − β) f contains the diffusion c Δφ with
+    c = (3√2/2) M₂ (A − β) ε. Against the implicit operator κ(εΔ² + (2/ε)Δ), a Fourier mode
+    of wavenumber k stays bounded while Δt((c + 2κ/ε)k² − κεk⁴) ≤ 2; the worst k gives
+    Δt ≤ 8κε / (c + 2κ/ε)². Returns (c, bound); bound is inf when c ≤ 0.
+    """
+    c = 1.5 * SQRT2 * params.M2 * (A - params.beta) * params.eps
+    if c <= 0 or not params.on("area"):
+        return c, math.inf
+    bound = 8.0 * params.kappa * params.eps / (c + 2.0 * params.kappa / params.eps) ** 2
+    return c, bound
+
+
+def diagnose_blowup(params: Params, dt: float, last: dict | None) -> str:
+    """Name the likely cause of a blow-up from the last finite diagnostics ``last``."""
+    causes = []
+    if last is not None and params.on("area") and math.isfinite(last.get("A", math.nan)):
+        A = last["A"]
+        c, bound = explicit_area_dt_bound(params, A)
+        if dt > bound:
+            causes.append(
+                f"explicit area penalty: A - beta = {A - params.beta:.3g} gives an explicit "
+                f"diffusion c = (3*sqrt(2)/2)*M2*(A-beta)*eps = {c:.3g}, which needs "
+                f"dt <= 8*kappa*eps/(c+2*kappa/eps)^2 = {bound:.3g} (dt = {dt:.3g}); "
+                "start closer to the target area (e.g. --ic consistent) or reduce --dt"
+            )
+    if not causes:
+        causes.append(
+            f"the explicit nonlinear terms at dt = {dt:.3g} "
+            f"(eps^3/kappa = {max_stable_dt(params):.3g}); "
+            "reduce --dt or start from a smoother initial condition"
+        )
+    return "; ".join(causes)

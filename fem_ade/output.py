@@ -1,0 +1,107 @@
+"""Everything the project writes: history.csv, summary.json, final.npz (and the output folder).
+
+Backends never write files; the driver hands rows and fields to the writers here.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import platform
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from .model import ModelError
+
+PACKAGES = ("fem_ade", "numpy", "scipy", "scikit-fem", "pyamg", "meshio", "pyvista", "matplotlib")
+
+
+def check_out_dir(path: str | Path, *, force: bool = False) -> Path:
+    """Refuse an existing non-empty folder unless ``force``; create nothing yet."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ModelError(f"--out {path} exists and is not a folder")
+    if path.is_dir() and any(path.iterdir()) and not force:
+        raise ModelError(
+            f"output folder {path} exists and is not empty; use --force or another --out"
+        )
+    return path
+
+
+def package_versions() -> dict:
+    versions = {"python": platform.python_version()}
+    for name in PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    return versions
+
+
+class HistoryWriter:
+    """history.csv: one row per recorded step, flushed at once so nothing is lost on failure."""
+
+    def __init__(self, path: str | Path, columns: tuple[str, ...]):
+        self.columns = columns
+        self._file = open(path, "w", newline="")  # noqa: SIM115 (closed in close())
+        self._csv = csv.writer(self._file)
+        self._csv.writerow(columns)
+        self._file.flush()
+
+    def write(self, row: dict) -> None:
+        out = []
+        for c in self.columns:
+            v = row.get(c, 0)
+            if isinstance(v, (float, np.floating)):
+                out.append(repr(float(v)))
+            else:
+                out.append(str(v))
+        self._csv.writerow(out)
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, set, frozenset)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.floating, float)):
+        f = float(obj)
+        return f if math.isfinite(f) else None
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def write_json_atomic(path: str | Path, data: dict) -> None:
+    path = Path(path)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(_jsonable(data), indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def write_fields(path: str | Path, fields: dict, **meta) -> None:
+    """final.npz (or last_good.npz): the backend's fields plus scalar metadata; atomic."""
+    path = Path(path)
+    tmp = path.with_name(path.stem + ".tmp.npz")
+    arrays = {k: np.asarray(v) for k, v in fields.items()}
+    arrays.update({k: np.asarray(v) for k, v in meta.items()})
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, path)
+
+
+def read_history(path: str | Path) -> dict[str, np.ndarray]:
+    """history.csv as a dict of column arrays."""
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    header, body = rows[0], rows[1:]
+    return {c: np.array([float(r[i]) for r in body]) for i, c in enumerate(header)}

@@ -1,0 +1,351 @@
+"""The scene catalogue: the paper's thirteen shapes (SPEC §7) and the teaching scenes.
+
+A scene is data plus a tiny constructor: parameters (:class:`fem_ade.model.Params`, whose
+``effects`` say which energy terms run), the paper's time step, a default resolution, an
+initial condition, and the paper figure it reproduces. Initial conditions are functions of
+position, so that every backend evaluates them on its own points (grid or mesh nodes).
+
+Initial conditions of the paper (SPEC §7): u₀ = tanh((c − q(x)) / (√2 ε)),
+q = (x−x₀)²/a + (y−y₀)²/b + (z−z₀)²/d. The consistent reading of c (the default) makes the
+initial volume match α; the printed one (``ic="printed"``) is kept as a hard case.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from .model import EFFECTS, PARAM_FIELDS, ModelError, Params
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+IC_VARIANTS = ("consistent", "printed")
+
+
+@dataclass(frozen=True)
+class InitialCondition:
+    """A diffuse closed surface: an ellipsoid level set (the paper's) or a sphere profile.
+
+    ``kind="ellipsoid"``: φ₀ = tanh((c − q(x)) / (√2ε)) with q = Σ (xᵢ − centreᵢ)² / axesᵢ,
+    where c is ``c_consistent`` or ``c_printed``.
+    ``kind="sphere"``: φ₀ = tanh((R − |x − centre|) / (√2ε)), the 1D equilibrium profile.
+    Displacements use the periodic minimum image, so a centre anywhere in the box works.
+    """
+
+    kind: str
+    centre: tuple[float, ...]
+    axes: tuple[float, ...] = ()
+    c_consistent: float = 0.0
+    c_printed: float = 0.0
+    radius: float = 0.0
+
+    def level(self, points: np.ndarray, L: float, variant: str = "consistent") -> tuple:
+        """Return (s, scale): φ₀ = tanh(s/(√2ε)); s > 0 inside; scale is s's typical size."""
+        centre = np.asarray(self.centre, dtype=float).reshape((-1,) + (1,) * (points.ndim - 1))
+        d = points - centre
+        d -= L * np.round(d / L)  # periodic minimum image
+        if self.kind == "sphere":
+            return self.radius - np.sqrt(np.sum(d * d, axis=0)), self.radius
+        axes = np.asarray(self.axes, dtype=float).reshape(centre.shape)
+        q = np.sum(d * d / axes, axis=0)
+        c = self.c_printed if variant == "printed" else self.c_consistent
+        return c - q, c
+
+    def volume_estimate(self, variant: str = "consistent") -> float:
+        """Sharp volume of the φ₀ = 0 surface (3D), for the SPEC §7 erratum check."""
+        if self.kind == "sphere":
+            return 4.0 / 3.0 * math.pi * self.radius**3
+        c = self.c_printed if variant == "printed" else self.c_consistent
+        return 4.0 / 3.0 * math.pi * math.prod(math.sqrt(c * a) for a in self.axes)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One simulation setup: parameters, effects, time step, resolution and initial condition."""
+
+    name: str
+    params: Params
+    dt: float
+    ic: InitialCondition
+    n: int = 64
+    dim: int = 3
+    figure: str = ""
+    description: str = ""
+    steps: int = 200  # default number of steps of the CLI (a short, visible run)
+
+    def initial_phi(
+        self,
+        points: np.ndarray,
+        *,
+        ic: str = "consistent",
+        perturb: float = 0.0,
+        seed: int = 0,
+    ) -> np.ndarray:
+        """φ₀ at ``points`` (shape (dim, ...)).
+
+        ``perturb`` > 0 adds a smooth, seeded perturbation of the level set:
+        s → s + perturb · scale · ψ(x), with ψ a random combination of the periodic Fourier
+        modes of |k|∞ ≤ 2 normalised so that |ψ| ≤ 1. It breaks symmetries without adding
+        grid-scale noise (which the paper's scheme does not survive, SPEC §7).
+        """
+        if ic not in IC_VARIANTS:
+            raise ModelError(f"unknown initial condition variant {ic!r}; use one of {IC_VARIANTS}")
+        points = np.asarray(points, dtype=float)
+        if points.shape[0] != self.dim:
+            raise ValueError(
+                f"scene {self.name} is {self.dim}D; got points of shape {points.shape}"
+            )
+        s, scale = self.ic.level(points, self.params.L, ic)
+        if perturb:
+            s = s + perturb * scale * smooth_perturbation(points, self.params.L, seed)
+        return np.tanh(s / (math.sqrt(2.0) * self.params.eps))
+
+    def with_(self, **changes) -> Scene:
+        """A copy with scene fields or parameters changed (parameter names go to Params)."""
+        pchanges = {k: changes.pop(k) for k in list(changes) if k in PARAM_FIELDS}
+        params = self.params.with_(**pchanges) if pchanges else self.params
+        return replace(self, params=params, **changes)
+
+
+def smooth_perturbation(points: np.ndarray, L: float, seed: int, kmax: int = 2) -> np.ndarray:
+    """A seeded, periodic, smooth field with |ψ| ≤ 1 built from Fourier modes |k|∞ ≤ kmax."""
+    rng = np.random.default_rng(seed)
+    dim = points.shape[0]
+    ks = np.stack(np.meshgrid(*[np.arange(-kmax, kmax + 1)] * dim, indexing="ij"), -1)
+    ks = ks.reshape(-1, dim)
+    ks = ks[np.any(ks != 0, axis=1)]
+    amps = rng.standard_normal(len(ks))
+    phases = rng.uniform(0.0, 2.0 * math.pi, len(ks))
+    amps /= np.sum(np.abs(amps))
+    psi = np.zeros(points.shape[1:])
+    for k, a, p in zip(ks, amps, phases, strict=True):
+        arg = 2.0 * math.pi / L * np.tensordot(k, points, axes=1)
+        psi += a * np.cos(arg + p)
+    return psi
+
+
+# ---------------------------------------------------------------------------------------
+# The catalogue
+# ---------------------------------------------------------------------------------------
+PAPER_EFFECTS = frozenset({"bending", "ade", "volume", "area"})
+_C = (0.5, 0.5, 0.5)
+
+
+def _paper(name, figure, eps, dt, alpha, beta, dA0, axes, c_printed, c_consistent, desc, **kw):
+    n = kw.pop("n", 64)
+    centre = kw.pop("centre", _C)
+    params = Params(eps=eps, alpha=alpha, beta=beta, delta_A0=dA0, effects=PAPER_EFFECTS, **kw)
+    ic = InitialCondition(
+        "ellipsoid", centre, axes, c_consistent=c_consistent, c_printed=c_printed
+    )
+    return Scene(name, params, dt, ic, n=n, figure=figure, description=desc)
+
+
+_A3 = (0.2**2, 0.2**2, 0.35**2)
+_S35 = (0.35**2,) * 3
+
+_PAPER = [
+    _paper("discocyte", "Fig. 1", 0.04, 5e-7, 0.0289, 0.4880, 0.1090, (0.5, 0.5, 0.1), 0.35,
+           0.35**2, "experiment 1: flattened ellipsoid relaxing to a discocyte"),
+    _paper("torus", "Fig. 2", 0.03, 2e-7, 0.0652, 0.9092, 0.2839, _S35, 0.6, 0.6,
+           "experiment 2: sphere with excess area and area difference forming a torus"),
+    _paper("biconcave", "Fig. 3a", 0.05, 5e-7, 0.0077, 0.1992, 0.1614, _A3, 0.5, 0.5**2,
+           "experiment 3a: prolate ellipsoid to a biconcave shape"),
+    _paper("gourd-early", "Fig. 3b", 0.05, 5e-7, 0.0077, 0.2068, 0.1676, _A3, 0.5, 0.5**2,
+           "experiment 3b: early gourd"),
+    _paper("gourd-elongated", "Fig. 3c", 0.05, 5e-7, 0.0077, 0.2390, 0.1906, _A3, 0.5, 0.5**2,
+           "experiment 3c: elongated gourd"),
+    _paper("gourd", "Fig. 3d", 0.05, 5e-7, 0.0077, 0.2390, 0.2253, _A3, 0.5, 0.5**2,
+           "experiment 3d: gourd"),
+    _paper("cylinder", "Fig. 3e", 0.05, 5e-7, 0.0077, 0.2390, 0.2426, _A3, 0.5, 0.5**2,
+           "experiment 3e: cylinder"),
+    _paper("two-spheres", "Fig. 4", 0.02, 2e-7, 0.0074, 0.1969, 0.0711, _A3, 0.5, 0.5**2,
+           "experiment 4: two connected spheres"),
+    _paper("chain", "Fig. 5", 0.02, 5e-7, 0.0074, 0.2328, 0.0958, _A3, 0.5, 0.5**2,
+           "experiment 5: chain of beads"),
+    _paper("three-arm", "Fig. 6", 0.02, 1e-7, 0.0226, 0.4489, 0.1520, _S35, 0.5, 0.5**2,
+           "experiment 6: three-armed starfish"),
+    _paper("four-arm", "Fig. 7", 0.02, 2e-7, 0.0097, 0.2550, 0.1146, (0.35**2, 0.35**2, 0.15**2),
+           0.5, 0.5**2, "experiment 7: four-armed starfish"),
+    _paper("six-arm", "Fig. 8", 0.02, 1e-7, 0.0529, 0.7911, 0.1766, _S35, 0.6, 0.6,
+           "experiment 8: six-armed starfish"),
+    _paper("nested", "Fig. 9", 0.03, 5e-7, 0.2693, 2.8347, 0.3939, (0.16, 0.16, 0.16), 1.0, 1.0,
+           "experiment 9: nested vesicle (L = 2)", n=100, centre=(1.0, 1.0, 1.0), L=2.0,
+           M1=1e4, M2=1e4),
+]
+
+
+def sphere_values(R: float, eps: float, D: float) -> dict:
+    """Diffuse volume, area and area difference of tanh((R − r)/(√2ε)) as h → 0 (SPEC §8)."""
+    return {
+        "V": 4.0 * math.pi * R**3 / 3.0 + (2.0 * math.pi**3 / 3.0) * R * eps**2,
+        "A": 4.0 * math.pi * (R**2 + (math.pi**2 - 6.0) * eps**2 / 6.0),
+        "dA": 8.0 * math.pi * D * R,
+        "W": 16.0 * math.sqrt(2.0) * math.pi / 3.0,
+    }
+
+
+def _sphere(name, effects, desc):
+    R, eps = 0.25, 0.04
+    sv = sphere_values(R, eps, 2.0 * eps / 3.0)
+    params = Params(eps=eps, alpha=sv["V"], beta=sv["A"], delta_A0=sv["dA"], effects=effects)
+    ic = InitialCondition("sphere", _C, radius=R)
+    return Scene(name, params, 5e-7, ic, n=48, figure="SPEC §8", description=desc)
+
+
+_TEACHING = [
+    _sphere("sphere", PAPER_EFFECTS,
+            "teaching: equilibrium sphere R = 0.25, alpha, beta, dA0 at its diffuse values"),
+    _sphere("sphere-bending", frozenset({"bending"}),
+            "teaching: the same sphere under bending only (W = 16*sqrt(2)*pi/3)"),
+]
+
+PAPER_SCENES: dict[str, Scene] = {s.name: s for s in _PAPER}
+TEACHING_SCENES: dict[str, Scene] = {s.name: s for s in _TEACHING}
+SCENES: dict[str, Scene] = {**PAPER_SCENES, **TEACHING_SCENES}
+
+
+def get_scene(name: str) -> Scene:
+    """A catalogue scene by name, or a clear :class:`ModelError` listing the valid names."""
+    try:
+        return SCENES[name]
+    except KeyError:
+        raise ModelError(
+            f"unknown scene {name!r}; valid scenes: {', '.join(SCENES)} (or a .toml file)"
+        ) from None
+
+
+# ---------------------------------------------------------------------------------------
+# Scenes from TOML files
+# ---------------------------------------------------------------------------------------
+_SCENE_KEYS = {"name": str, "figure": str, "description": str, "n": int, "dim": int,
+               "dt": float, "steps": int}
+_IC_KEYS = {"kind": str, "centre": list, "axes": list, "c_consistent": float,
+            "c_printed": float, "c": float, "radius": float}
+
+
+def _typed(table: str, key: str, value, kind):
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if kind is list:
+        if not (isinstance(value, list) and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+            raise ModelError(f"{table}.{key} must be a list of numbers, got {value!r}")
+        return tuple(float(v) for v in value)
+    if not isinstance(value, kind) or isinstance(value, bool):
+        raise ModelError(f"{table}.{key} must be of type {kind.__name__}, got {value!r}")
+    return value
+
+
+def load_scene_file(path: str | Path) -> Scene:
+    """Load a scene from a TOML file with the fields of :class:`Scene`.
+
+    Layout (``base`` is optional and starts from a catalogue scene)::
+
+        name = "my-disc"      # optional: base's name or the file's stem
+        base = "discocyte"    # optional
+        dt = 5e-7
+        n = 48
+        [params]              # any field of Params; effects is a list of names
+        eps = 0.04
+        alpha = 0.0289
+        effects = ["bending", "ade", "volume", "area"]
+        [ic]                  # kind = "ellipsoid" (centre, axes, c or c_consistent/c_printed)
+        kind = "ellipsoid"    # or "sphere" (centre, radius)
+
+    Unknown keys and ill-typed values raise :class:`ModelError`.
+    """
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ModelError(f"scene file not found: {path}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ModelError(f"malformed TOML in {path}: {err}") from None
+
+    base = data.pop("base", None)
+    if base is not None and not isinstance(base, str):
+        raise ModelError(f"base must be a scene name, got {base!r}")
+    params_t = data.pop("params", {})
+    ic_t = data.pop("ic", None)
+    if not isinstance(params_t, dict) or (ic_t is not None and not isinstance(ic_t, dict)):
+        raise ModelError("[params] and [ic] must be TOML tables")
+    scene_kw = {}
+    for key, value in data.items():
+        if key not in _SCENE_KEYS:
+            raise ModelError(f"unknown field {key!r} in {path}; valid: base, params, ic, "
+                             f"{', '.join(_SCENE_KEYS)}")
+        scene_kw[key] = _typed("scene", key, value, _SCENE_KEYS[key])
+
+    param_kw = {}
+    for key, value in params_t.items():
+        if key not in PARAM_FIELDS:
+            raise ModelError(
+                f"unknown field params.{key!r}; valid: {', '.join(sorted(PARAM_FIELDS))}"
+            )
+        if key == "effects":
+            if not (isinstance(value, list) and all(isinstance(v, str) for v in value)):
+                raise ModelError(f"params.effects must be a list of names from {EFFECTS}")
+            param_kw[key] = frozenset(value)
+        else:
+            param_kw[key] = _typed("params", key, value, float)
+
+    ic = None
+    if ic_t is not None:
+        ic_kw = {}
+        for key, value in ic_t.items():
+            if key not in _IC_KEYS:
+                raise ModelError(f"unknown field ic.{key!r}; valid: {', '.join(_IC_KEYS)}")
+            ic_kw[key] = _typed("ic", key, value, _IC_KEYS[key])
+        if "c" in ic_kw:
+            c = ic_kw.pop("c")
+            ic_kw.setdefault("c_consistent", c)
+            ic_kw.setdefault("c_printed", c)
+        if ic_kw.get("kind") not in ("ellipsoid", "sphere"):
+            raise ModelError("ic.kind must be 'ellipsoid' or 'sphere'")
+        if "centre" not in ic_kw:
+            raise ModelError("ic.centre is required")
+        ic = InitialCondition(**ic_kw)
+
+    if base is not None:
+        scene = get_scene(base)
+        params = scene.params.with_(**param_kw) if param_kw else scene.params
+        if "eps" in param_kw and "D" not in param_kw and scene.params.D == 2 * scene.params.eps / 3:
+            params = params.with_(D=2 * params.eps / 3)
+        if "beta" in param_kw and "A0" not in param_kw and scene.params.A0 == scene.params.beta:
+            params = params.with_(A0=params.beta)
+        scene = replace(scene, params=params, ic=ic or scene.ic, **scene_kw)
+        if "name" not in scene_kw:
+            scene = replace(scene, name=path.stem)
+    else:
+        missing = [k for k in ("dt",) if k not in scene_kw] + (["ic"] if ic is None else []) + [
+            k for k in ("eps", "alpha", "beta") if k not in param_kw]
+        if missing:
+            raise ModelError(f"scene file {path} misses {', '.join(missing)} (or give base = NAME)")
+        try:
+            params = Params(**param_kw)
+        except TypeError as err:
+            raise ModelError(f"bad [params] in {path}: {err}") from None
+        scene_kw.setdefault("name", path.stem)
+        scene = Scene(params=params, ic=ic, **scene_kw)
+
+    if scene.ic.kind == "ellipsoid" and len(scene.ic.axes) != scene.dim:
+        raise ModelError(f"ic.axes needs {scene.dim} values for a {scene.dim}D scene")
+    if len(scene.ic.centre) != scene.dim:
+        raise ModelError(f"ic.centre needs {scene.dim} values for a {scene.dim}D scene")
+    scene.params.validate()
+    return scene
+
+
+def resolve_scene(name_or_path: str) -> Scene:
+    """A catalogue name or a path to a ``.toml`` scene file."""
+    if name_or_path.endswith(".toml") or Path(name_or_path).is_file():
+        return load_scene_file(name_or_path)
+    return get_scene(name_or_path)

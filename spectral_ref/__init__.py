@@ -1,0 +1,5 @@
+"""spectral_ref: a compact, independent Fourier-spectral reference solver (SPEC §2–§4, §6)."""
+
+from .solver import SpectralBackend
+
+__all__ = ["SpectralBackend"]

@@ -1,0 +1,114 @@
+"""The command line end to end, and every bad input of the foundation issue (exit code 2)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fem_ade.output import read_history
+
+COLUMNS = ["step", "t", "E", "W", "G", "V", "A", "dA"]
+
+
+def test_cli_end_to_end(cli, tmp_path):
+    out = tmp_path / "D"
+    r = cli(["discocyte", "--backend", "spectral", "--n", "32", "--steps", "100", "--every", "50",
+             "--out", out])
+    assert r.returncode == 0, r.stderr
+    assert "completed 100 steps" in r.stdout
+    h = read_history(out / "history.csv")
+    assert list(h)[:8] == COLUMNS
+    assert list(h["step"]) == [0, 50, 100]
+    assert np.allclose(h["t"], h["step"] * 5e-7)
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("scene", "parameters", "backend", "n", "dt", "steps", "status", "final",
+                "wall_s", "versions"):
+        assert key in summary, key
+    assert summary["status"] == "completed" and summary["steps"] == 100
+    assert summary["final"]["E"] == pytest.approx(h["E"][-1], rel=1e-14)
+    final = np.load(out / "final.npz")
+    assert final["phi"].shape == (32, 32, 32) and int(final["step"]) == 100
+
+
+def test_cli_list(cli):
+    r = cli(["--list"])
+    assert r.returncode == 0
+    for name in ("discocyte", "torus", "nested", "six-arm", "sphere", "sphere-bending"):
+        assert name in r.stdout
+    assert "Fig. 9" in r.stdout
+
+
+def test_until_steady_stops(cli, tmp_path):
+    out = tmp_path / "S"
+    r = cli(["sphere", "--n", "32", "--until-steady", "1e-4", "--every", "5", "--out", out,
+             "--quiet"])
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "steady" and s["steps"] == 5
+
+
+def test_printed_ic_diverges_cleanly(cli, tmp_path):
+    """The printed discocyte IC at its paper Δt: exit 3, a diagnosis, no non-finite row."""
+    out = tmp_path / "P"
+    r = cli(["discocyte", "--ic", "printed", "--n", "32", "--steps", "100", "--every", "1",
+             "--out", out, "--quiet"])
+    assert r.returncode == 3, r.stdout + r.stderr
+    assert "explicit area penalty" in r.stderr and "diverged at step" in r.stderr
+    h = read_history(out / "history.csv")
+    assert all(np.all(np.isfinite(v)) for v in h.values())
+    final = np.load(out / "final.npz")
+    assert np.all(np.isfinite(final["phi"])) and str(final["status"]) == "diverged"
+    assert json.loads((out / "summary.json").read_text())["status"] == "diverged"
+
+
+BAD = [
+    (["nosuchscene"], "unknown scene"),
+    (["discocyte", "--dt", "0"], "time step must be positive"),
+    (["discocyte", "--dt=-1e-7"], "time step must be positive"),
+    (["discocyte", "--dt", "1e-4"], "eps^3/kappa"),
+    (["discocyte", "--n", "4"], "n must be"),
+    (["two-spheres", "--n", "32"], "grid too coarse"),
+    (["discocyte", "--steps", "ten"], "invalid int"),
+    (["discocyte", "--backend", "lattice"], "invalid choice"),
+    (["discocyte", "--order", "2"], "fem only"),
+]
+
+
+@pytest.mark.parametrize("args, match", BAD)
+def test_bad_input(cli, tmp_path, args, match):
+    out = tmp_path / "never"
+    r = cli([*args, "--out", out])
+    assert r.returncode == 2
+    assert match in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("params, match", [
+    ("eps = -0.04", "eps must be"),
+    ("eps = 0.0", "eps must be"),
+    ("alpha = 0.0", "alpha must be positive"),
+    ("beta = -1.0", "beta must be positive"),
+    ("eps = [", "malformed TOML"),
+])
+def test_bad_scene_file(cli, tmp_path, params, match):
+    f = tmp_path / "s.toml"
+    f.write_text(f'base = "discocyte"\n[params]\n{params}\n')
+    out = tmp_path / "never"
+    r = cli([f, "--n", "32", "--out", out])
+    assert r.returncode == 2 and match in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_existing_out_dir(cli, tmp_path):
+    out = tmp_path / "full"
+    out.mkdir()
+    (out / "keep.txt").write_text("precious")
+    r = cli(["sphere", "--n", "16", "--steps", "2", "--out", out, "--allow-underresolved"])
+    assert r.returncode == 2 and "not empty" in r.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
+    r = cli(["sphere", "--n", "16", "--steps", "2", "--out", out, "--allow-underresolved",
+             "--force", "--quiet"])
+    assert r.returncode == 0, r.stderr
+    assert (out / "keep.txt").read_text() == "precious" and (out / "history.csv").exists()
