@@ -20,7 +20,9 @@ from .scenes import Scene
 class Backend(Protocol):
     """The interface of a backend (the spectral reference and the FEM implement it).
 
-    Construction: ``Backend(scene, n=..., dt=..., ic=..., perturb=..., seed=..., **options)``.
+    Construction: ``Backend(scene, n=..., dt=..., ic=..., perturb=..., seed=..., scheme=...,
+    **options)``; ``scheme`` is ``"paper"`` (SPEC §4) or ``"stabilized"`` (the large-step
+    scheme, see :func:`fem_ade.model.stabilization_coefficients`).
     """
 
     #: short name used in the CLI and in summary.json
@@ -32,6 +34,9 @@ class Backend(Protocol):
 
     def step(self) -> dict:
         """Advance one step in place; return the values of ``extra_columns`` for this step."""
+
+    def set_dt(self, dt: float) -> None:
+        """Change the time step (adaptive Δt); rebuild whatever depends on it."""
 
     def diagnostics(self) -> dict:
         """E, W, G, V, A, dA of the current state (terms that are off report 0)."""

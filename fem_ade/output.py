@@ -45,11 +45,12 @@ def package_versions() -> dict:
 class HistoryWriter:
     """history.csv: one row per recorded step, flushed at once so nothing is lost on failure."""
 
-    def __init__(self, path: str | Path, columns: tuple[str, ...]):
+    def __init__(self, path: str | Path, columns: tuple[str, ...], *, append: bool = False):
         self.columns = columns
-        self._file = open(path, "w", newline="")  # noqa: SIM115 (closed in close())
+        self._file = open(path, "a" if append else "w", newline="")  # noqa: SIM115
         self._csv = csv.writer(self._file)
-        self._csv.writerow(columns)
+        if not append:
+            self._csv.writerow(columns)
         self._file.flush()
 
     def write(self, row: dict) -> None:
@@ -105,3 +106,19 @@ def read_history(path: str | Path) -> dict[str, np.ndarray]:
         rows = list(csv.reader(f))
     header, body = rows[0], rows[1:]
     return {c: np.array([float(r[i]) for r in body]) for i, c in enumerate(header)}
+
+
+def truncate_history(path: str | Path, last_step: int) -> None:
+    """Drop the rows of history.csv after ``last_step`` (before a resumed run appends)."""
+    path = Path(path)
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    keep = [rows[0]] + [r for r in rows[1:] if int(r[0]) <= last_step]
+    tmp = path.with_suffix(".csv.tmp")
+    with open(tmp, "w", newline="") as f:
+        csv.writer(f).writerows(keep)
+    os.replace(tmp, path)
+
+
+def read_json(path: str | Path) -> dict:
+    return json.loads(Path(path).read_text())

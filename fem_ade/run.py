@@ -9,12 +9,14 @@ stderr, nothing written), 3 diverged (diagnosis printed, last finite state saved
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
 from pathlib import Path
 
-from .driver import EXIT_BAD_INPUT, simulate
+from .driver import EXIT_BAD_INPUT, resume, simulate
 from .model import ModelError
+from .output import read_json
 from .scenes import PAPER_SCENES, SCENES, TEACHING_SCENES, resolve_scene
 
 
@@ -29,6 +31,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run a vesicle scene of the ADE phase-field model (see --list).",
     )
     p.add_argument("scene", nargs="?", help="a scene name (see --list) or a .toml scene file")
+    p.add_argument("--resume", metavar="DIR",
+                   help="continue the run in DIR from its checkpoint (up to --steps)")
     p.add_argument("--list", action="store_true", help="list the scenes with their paper figure")
     p.add_argument("--backend", choices=("fem", "spectral"), default="spectral",
                    help="discretisation (default: spectral)")
@@ -46,6 +50,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--perturb", type=float, default=0.0,
                    help="amplitude of a smooth seeded level-set perturbation (default 0)")
     p.add_argument("--seed", type=int, default=0, help="seed of --perturb (default 0)")
+    p.add_argument("--scheme", choices=("paper", "stabilized"), default="paper",
+                   help="paper: the semi-implicit scheme of the paper (default); stabilized: "
+                        "linear, one solve per step, energy-stable at >= 100x the paper's dt")
+    p.add_argument("--adaptive", action="store_true",
+                   help="adapt dt: grow while E_M decays, halve on a rejected step")
+    p.add_argument("--checkpoint-every", type=int, metavar="K",
+                   help="write OUT/checkpoint.npz every K steps (Ctrl-C writes one too)")
     p.add_argument("--out", help="output folder (default: runs/SCENE-BACKEND-TIME)")
     p.add_argument("--force", action="store_true", help="write into a non-empty --out folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -75,6 +86,20 @@ def main(argv: list[str] | None = None) -> int:
     if args.list:
         print(list_scenes())
         return 0
+    signal.signal(signal.SIGTERM, _interrupt)
+    if args.resume is not None:
+        if args.scene is not None:
+            print("fem_ade.run: error: --resume DIR takes no scene (it is stored in DIR)",
+                  file=sys.stderr)
+            return EXIT_BAD_INPUT
+        try:
+            result = resume(args.resume, steps=args.steps, quiet=args.quiet)
+            summary = read_json(Path(args.resume) / "run.json")
+        except (ModelError, FileNotFoundError) as err:
+            print(f"fem_ade.run: error: {err}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        return _report(summary["scene"]["name"], summary["backend"], result,
+                       summary["scene"]["params"], args.resume)
     if args.scene is None:
         print(f"fem_ade.run: error: give a scene ({', '.join(SCENES)}) or a .toml file",
               file=sys.stderr)
@@ -93,18 +118,29 @@ def main(argv: list[str] | None = None) -> int:
             until_steady=args.until_steady, max_steps=args.max_steps, every=args.every,
             ic=args.ic, perturb=args.perturb, seed=args.seed, out=out, force=args.force,
             quiet=args.quiet, allow_underresolved=args.allow_underresolved,
-            backend_options=options,
+            backend_options=options, scheme=args.scheme, adaptive=args.adaptive,
+            checkpoint_every=args.checkpoint_every,
         )
     except ModelError as err:
         print(f"fem_ade.run: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    f, p = result.final, scene.params
+    return _report(scene.name, args.backend, result, scene.params.as_dict(), out)
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def _report(name: str, backend: str, result, params: dict, out) -> int:
+    f = result.final
     stream = sys.stderr if result.exit_code else sys.stdout
-    print(f"{scene.name} [{args.backend}]: {result.message}", file=stream)
+    print(f"{name} [{backend}]: {result.message}", file=stream)
     print(f"  t = {result.t:.4g}  E = {f['E']:.6g}  W = {f['W']:.6g}  G = {f['G']:.4g}  "
-          f"V/alpha = {f['V'] / p.alpha:.4f}  A/beta = {f['A'] / p.beta:.4f}  "
+          f"V/alpha = {f['V'] / params['alpha']:.4f}  A/beta = {f['A'] / params['beta']:.4f}  "
           f"dA = {f['dA']:.4g}  ({result.wall_s:.1f} s)")
     print(f"  results in {out}/ (history.csv, summary.json, final.npz)")
+    if result.status == "interrupted":
+        print(f"  to continue: python -m fem_ade.run --resume {out} [--steps N]", file=stream)
     return result.exit_code
 
 

@@ -269,7 +269,13 @@ def load_scene_file(path: str | Path) -> Scene:
         raise ModelError(f"scene file not found: {path}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise ModelError(f"malformed TOML in {path}: {err}") from None
+    return scene_from_mapping(data, default_name=path.stem, where=str(path))
 
+
+def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = "scene") -> Scene:
+    """Build a scene from the mapping of a TOML scene file (see :func:`load_scene_file`)."""
+    data = dict(data)
+    path = where
     base = data.pop("base", None)
     if base is not None and not isinstance(base, str):
         raise ModelError(f"base must be a scene name, got {base!r}")
@@ -323,7 +329,7 @@ def load_scene_file(path: str | Path) -> Scene:
             params = params.with_(A0=params.beta)
         scene = replace(scene, params=params, ic=ic or scene.ic, **scene_kw)
         if "name" not in scene_kw:
-            scene = replace(scene, name=path.stem)
+            scene = replace(scene, name=default_name)
     else:
         missing = [k for k in ("dt",) if k not in scene_kw] + (["ic"] if ic is None else []) + [
             k for k in ("eps", "alpha", "beta") if k not in param_kw]
@@ -333,7 +339,7 @@ def load_scene_file(path: str | Path) -> Scene:
             params = Params(**param_kw)
         except TypeError as err:
             raise ModelError(f"bad [params] in {path}: {err}") from None
-        scene_kw.setdefault("name", path.stem)
+        scene_kw.setdefault("name", default_name)
         scene = Scene(params=params, ic=ic, **scene_kw)
 
     if scene.ic.kind == "ellipsoid" and len(scene.ic.axes) != scene.dim:
@@ -342,6 +348,16 @@ def load_scene_file(path: str | Path) -> Scene:
         raise ModelError(f"ic.centre needs {scene.dim} values for a {scene.dim}D scene")
     scene.params.validate()
     return scene
+
+
+def scene_to_mapping(scene: Scene) -> dict:
+    """The inverse of :func:`scene_from_mapping` (used to store a run's scene for --resume)."""
+    params = scene.params.as_dict()
+    ic = {k: (list(v) if isinstance(v, tuple) else v)
+          for k, v in scene.ic.__dict__.items()}
+    return {"name": scene.name, "figure": scene.figure, "description": scene.description,
+            "n": scene.n, "dim": scene.dim, "dt": scene.dt, "steps": scene.steps,
+            "params": params, "ic": ic}
 
 
 def resolve_scene(name_or_path: str) -> Scene:

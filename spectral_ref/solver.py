@@ -23,6 +23,8 @@ import math
 import numpy as np
 from scipy import fft
 
+from fem_ade.model import stabilization_coefficients
+
 SQRT2 = math.sqrt(2.0)
 
 
@@ -99,6 +101,22 @@ def area_force(phi, lap, A, p):
     return -1.5 * SQRT2 * p.M2 * (A - p.beta) * f
 
 
+SCHEMES = ("paper", "stabilized")
+
+
+def stabilization_symbol(k2, p, A, dA, dim):
+    """The diagonal part S of the large-step scheme, added as S(φⁿ⁺¹ − φⁿ) (SPEC §10).
+
+    S = s₀ + s₂|k|² (:func:`fem_ade.model.stabilization_coefficients`) + σ_V δ_k0, where
+    σ_V = M₁|Ω|/2 is the volume penalty's rank-one Hessian, which acts on the mean only.
+    """
+    s0, s2 = stabilization_coefficients(p, A, dA)
+    S = s0 + s2 * k2
+    if p.on("volume"):
+        S[(0,) * dim] += 0.5 * p.M1 * p.L**dim
+    return S
+
+
 class SpectralBackend:
     """The spectral reference as a backend of :mod:`fem_ade.driver` (see fem_ade.backend)."""
 
@@ -106,8 +124,11 @@ class SpectralBackend:
     extra_columns: tuple[str, ...] = ()
 
     def __init__(self, scene, *, n: int, dt: float, ic: str = "consistent",
-                 perturb: float = 0.0, seed: int = 0, workers: int | None = None):
-        self.scene, self.p, self.n, self.dt = scene, scene.params, n, dt
+                 perturb: float = 0.0, seed: int = 0, scheme: str = "paper",
+                 workers: int | None = None):
+        if scheme not in SCHEMES:
+            raise ValueError(f"unknown scheme {scheme!r}; valid: {', '.join(SCHEMES)}")
+        self.scene, self.p, self.n, self.scheme = scene, scene.params, n, scheme
         self.dim = scene.dim
         L = self.p.L
         self.dV = (L / n) ** self.dim
@@ -117,20 +138,40 @@ class SpectralBackend:
         self.points = np.stack(np.meshgrid(*[x] * self.dim, indexing="ij"))
         phi0 = scene.initial_phi(self.points, ic=ic, perturb=perturb, seed=seed)
         self.k2 = wavenumbers_squared(n, L, self.dim)
-        p = self.p
-        # the implicit symbol of SPEC §4, divided by nothing: 1/Δt + κ(ε|k|⁴ − (2/ε)|k|²)
-        self.symbol = 1.0 / dt + p.kappa * (p.eps * self.k2**2 - (2.0 / p.eps) * self.k2)
+        self.set_dt(dt)
         self._set_hat(self._fwd(phi0))
+
+    def set_dt(self, dt: float) -> None:
+        """Set Δt; the implicit symbol of SPEC §4 is 1/Δt + κ(ε|k|⁴ − (2/ε)|k|²)."""
+        p = self.p
+        self.dt = dt
+        self.symbol = 1.0 / dt + p.kappa * (p.eps * self.k2**2 - (2.0 / p.eps) * self.k2)
 
     # -- transforms -------------------------------------------------------------------
     def _fwd(self, u):
         return fft.rfftn(u, axes=self.axes, workers=self.workers)
 
+    def _hermitian(self, u_hat):
+        """Remove (in place) the part of a half-spectrum that ``irfftn`` cannot see.
+
+        In the planes k_last = 0 and k_last = n/2 a real field's coefficients satisfy
+        û(−k) = conj(û(k)). Round-off breaks this slightly, ``irfftn`` ignores the broken
+        part, and the implicit operator amplifies it by 1/(1 − Δtκ/ε³) per step wherever
+        κ(ε|k|⁴ − (2/ε)|k|²) < 0: invisible at first, it reaches the field through round-off
+        after a few thousand steps. Projecting those two planes keeps φ̂ the transform of φ.
+        """
+        axes = tuple(range(self.dim - 1))
+        for iz in (0, self.n // 2) if self.n % 2 == 0 else (0,):
+            plane = u_hat[..., iz]
+            mirror = np.conj(np.roll(np.flip(plane, axis=axes), 1, axis=axes))
+            u_hat[..., iz] = 0.5 * (plane + mirror)
+        return u_hat
+
     def _inv(self, u_hat):
         return fft.irfftn(u_hat, s=(self.n,) * self.dim, axes=self.axes, workers=self.workers)
 
     def _set_hat(self, phi_hat):
-        self.phi_hat = phi_hat
+        self.phi_hat = self._hermitian(phi_hat)
         self.phi = self._inv(phi_hat)
         self.lap = self._inv(-self.k2 * phi_hat)
 
@@ -138,17 +179,61 @@ class SpectralBackend:
     def step(self) -> dict:
         p, phi, lap, dV = self.p, self.phi, self.lap, self.dV
         P, Q = bending_force_explicit(phi, lap, p)
+        dA = None
         if p.on("ade"):
             dA = area_difference(phi, lap, p, dV)
             Ph, Qh = ade_force(phi, lap, dA, p)
             P, Q = P + Ph, Q + Qh
-        if p.on("area"):
-            P = P + area_force(phi, lap, area(phi, lap, p, dV), p)
+        A = area(phi, lap, p, dV) if p.on("area") else None
+        if A is not None:
+            P = P + area_force(phi, lap, A, p)
         R_hat = self._fwd(P) - self.k2 * self._fwd(Q)
         if p.on("volume"):  # a constant: only the k = 0 mode
             R_hat[(0,) * self.dim] += p.M1 * (volume(phi, dV) - p.alpha) * self.n**self.dim
-        self._set_hat((self.phi_hat / self.dt - R_hat) / self.symbol)
+        if self.scheme == "paper":
+            self._set_hat((self.phi_hat / self.dt - R_hat) / self.symbol)
+        else:
+            self._set_hat(self.phi_hat + self._stabilized_increment(R_hat, A, dA))
         return {}
+
+    def _inner(self, a_hat, b_hat) -> float:
+        """∫ a b over the box from half-spectra (Parseval with the rfft weights)."""
+        w = np.full(a_hat.shape[-1], 2.0)
+        w[0] = 1.0
+        if self.n % 2 == 0:
+            w[-1] = 1.0
+        return self.dV / self.n**self.dim * float(np.sum(w * (np.conj(a_hat) * b_hat).real))
+
+    def _stabilized_increment(self, R_hat, A, dA):
+        """δ = φⁿ⁺¹ − φⁿ of the large-step scheme (SPEC §10 recipe, made concrete):
+
+        (1/Δt + 𝓛 + S) δ + Σᵢ σᵢ gᵢ ⟨gᵢ, δ⟩ = −Rⁿ − 𝓛φⁿ,   𝓛 = κ(εΔ² + (2/ε)Δ),
+
+        S the diagonal of :func:`stabilization_symbol`; the rank-one terms are the Hessians of
+        the penalties, σ gᵢgᵢᵀ: area 2M₂ with g = δA/δφ, ADE κ̄π/(A₀D²) with g = δΔA/δφ.
+        They are solved by Woodbury on top of the diagonal operator.
+        """
+        p, phi, lap = self.p, self.phi, self.lap
+        L_hat = self.symbol - 1.0 / self.dt
+        d = self.symbol + stabilization_symbol(self.k2, p, A, dA, self.dim)
+        y = (-R_hat - L_hat * self.phi_hat) / d
+        low_rank = []
+        if A is not None and p.M2 > 0:  # g = −(3√2/4) f
+            f_hat = -p.eps * self.k2 * self.phi_hat - self._fwd((phi * phi - 1.0) * phi) / p.eps
+            low_rank.append((2.0 * p.M2, -0.75 * SQRT2 * f_hat))
+        if dA is not None and p.kappa_bar > 0:  # g = −(3D/4)(−2φΔφ − Δ(φ²) + (1 − 6φ² + 5φ⁴)/ε²)
+            phi2 = phi * phi
+            Pg = -2.0 * phi * lap + (1.0 - 6.0 * phi2 + 5.0 * phi2 * phi2) / p.eps**2
+            g_hat = -0.75 * p.D * (self._fwd(Pg) + self.k2 * self._fwd(phi2))
+            low_rank.append((p.kappa_bar * math.pi / (p.A0 * p.D**2), g_hat))
+        if not low_rank:
+            return y
+        z = [g / d for _, g in low_rank]
+        m = len(low_rank)
+        G = np.array([[self._inner(low_rank[i][1], z[j]) for j in range(m)] for i in range(m)])
+        b = np.array([self._inner(g, y) for _, g in low_rank])
+        c = np.linalg.solve(np.diag([1.0 / sig for sig, _ in low_rank]) + G, b)
+        return y - sum(ci * zi for ci, zi in zip(c, z, strict=True))
 
     # -- measurements -----------------------------------------------------------------
     def diagnostics(self) -> dict:
