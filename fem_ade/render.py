@@ -1,0 +1,485 @@
+"""Pictures of a run, made without a display: the vesicle's shape and its history.
+
+* :func:`render_shape` — ``shape.png``: a 3D view of the membrane {φ = 0} (left) and the
+  cross-section of φ on the mid-plane y = L/2 with its zero contour (right).
+* :func:`render_history` — ``history.png``: the energy E_M and its parts, and V/α, A/β,
+  ΔA/ΔA₀ against time.
+* ``python -m fem_ade.render OUT [--view AZ EL] [--size W H] [--engine ...]`` re-renders a
+  finished run folder (see :func:`main`).
+
+Rendering without a display
+---------------------------
+The 3D view is drawn by VTK (through pyvista) off screen. The PyPI ``vtk`` wheels (≥ 9.4)
+pick an OpenGL context at run time: X11 if there is a display, else EGL, else OSMesa. With
+no display they need the system's Mesa EGL (Debian/Ubuntu: ``apt-get install libegl1
+libgl1-mesa-dri``; or OSMesa: ``libosmesa6``); there is no pip-installable Mesa for them any
+more (the ``vtk-osmesa`` wheels stopped at 9.3). When no context can be made VTK crashes the
+process instead of raising, so ``engine="auto"`` first tries a tiny render in a subprocess
+(once per process, about a second) and, if that fails, draws the 3D view with matplotlib
+instead (pure pip, slower and plainer, with a one-line warning). ``FEM_ADE_RENDER_ENGINE``
+(``vtk`` or ``matplotlib``) skips the probe.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .shape import Surface, describe, extract_surface, summary_line
+
+ENGINES = ("auto", "vtk", "matplotlib")
+#: default camera: azimuth from +x towards +y, elevation above the xy-plane (degrees)
+DEFAULT_VIEW = (-60.0, 25.0)
+#: surface colours by component (largest first)
+COLOURS = ("#e0a84a", "#5b8fc7", "#8cc084", "#c7698b", "#9a86c9", "#7fb7be")
+
+_PROBE = """
+import pyvista as pv
+p = pv.Plotter(off_screen=True, window_size=(32, 32))
+p.add_mesh(pv.Sphere())
+img = p.screenshot(return_img=True)
+print(type(p.ren_win).__name__, img.shape[0])
+p.close()
+"""
+_vtk_probe: tuple[bool, str] | None = None
+
+
+def vtk_offscreen_status(timeout: float = 120.0) -> tuple[bool, str]:
+    """(works, detail): can VTK render off screen here? Probed once, in a subprocess."""
+    global _vtk_probe
+    if _vtk_probe is None:
+        try:
+            r = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True,
+                               timeout=timeout)
+            words = r.stdout.split()
+            ok = r.returncode == 0 and len(words) == 2
+            last = re.sub(r"\x1b\[[0-9;]*m", "", r.stderr).strip().splitlines()[-1:]
+            detail = words[0] if ok else (f"probe exit code {r.returncode}"
+                                          + (f": {last[0][-200:]}" if last else ""))
+        except (OSError, subprocess.TimeoutExpired) as err:
+            ok, detail = False, str(err)
+        _vtk_probe = (ok, detail)
+    return _vtk_probe
+
+
+def choose_engine(engine: str = "auto") -> str:
+    """Resolve ``engine`` ("auto", "vtk", "matplotlib"); see the module docstring."""
+    engine = os.environ.get("FEM_ADE_RENDER_ENGINE", engine) if engine == "auto" else engine
+    if engine not in ENGINES:
+        raise ValueError(f"unknown render engine {engine!r}; use one of {ENGINES}")
+    if engine != "auto":
+        return engine
+    ok, detail = vtk_offscreen_status()
+    if ok:
+        if not os.environ.get("DISPLAY"):  # skip VTK's X11 attempt (and its warning)
+            os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", detail)
+        return "vtk"
+    warnings.warn("VTK cannot render off screen here (no EGL/OSMesa; on Debian/Ubuntu: "
+                  "apt-get install libegl1 libgl1-mesa-dri); drawing the 3D view with "
+                  f"matplotlib ({detail})", RuntimeWarning, stacklevel=3)
+    return "matplotlib"
+
+
+# --- camera ----------------------------------------------------------------------------
+def _view_vectors(view: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(towards the camera, screen right, screen up) for azimuth/elevation in degrees, z up."""
+    az, el = (math.radians(v) for v in view)
+    back = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+    right = np.array([-math.sin(az), math.cos(az), 0.0])
+    up = np.cross(back, right)
+    return back, right, up
+
+
+def _draw_triad(ax, view, *, at=(0.1, 0.1), size=0.07) -> None:
+    """x, y, z arrows in the corner of an image axis, as the camera sees them."""
+    _, right, up = _view_vectors(view)
+    for k, (name, colour) in enumerate(zip("xyz", ("#c0392b", "#27ae60", "#2c5aa0"), strict=True)):
+        e = np.eye(3)[k]
+        d = np.array([e @ right, e @ up]) * size
+        ax.annotate("", xy=(at[0] + d[0], at[1] + d[1]), xytext=at, xycoords="axes fraction",
+                    arrowprops={"arrowstyle": "-|>", "color": colour, "lw": 1.6})
+        if np.hypot(*d) > 0.2 * size:
+            ax.text(at[0] + 1.35 * d[0], at[1] + 1.35 * d[1], name, color=colour,
+                    transform=ax.transAxes, ha="center", va="center", fontsize=11)
+
+
+# --- the 3D view -----------------------------------------------------------------------
+def _enclosing(desc: dict | None, nc: int) -> set[int]:
+    if not desc:
+        return set()
+    return {j for j in desc.get("inside_of", [])[:nc] if j is not None}
+
+
+def _render_vtk(S: Surface, size: tuple[int, int], view, slice_y: float,
+                translucent: set[int]) -> np.ndarray:
+    """The surface rendered by VTK off screen: an RGB image array."""
+    import pyvista as pv
+
+    pv.OFF_SCREEN = True
+    p = pv.Plotter(off_screen=True, window_size=size)
+    p.set_background("white")
+    for c in range(S.n_components):
+        pts, faces = S.component_mesh(c)
+        mesh = pv.PolyData.from_regular_faces(pts, faces)
+        mesh.point_data["Normals"] = S.outward_normals_at(pts)  # smooth: from ∇φ
+        mesh.point_data.active_normals_name = "Normals"
+        p.add_mesh(mesh, color=COLOURS[c % len(COLOURS)], smooth_shading=True,
+                   opacity=0.35 if c in translucent else 1.0, specular=0.35,
+                   specular_power=25, ambient=0.12, diffuse=0.85)
+        trace = mesh.slice(normal="y", origin=(0.0, slice_y, 0.0))
+        if trace.n_points:
+            p.add_mesh(trace, color="#1a1a1a", line_width=5)
+    if S.n_components:
+        pts = S.points
+        centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+        radius = 0.5 * float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+    else:
+        centre, radius = S.origin + 0.5 * S.L, 0.5 * S.L
+    back, _, up = _view_vectors(view)
+    p.camera.focal_point = tuple(centre)
+    p.camera.position = tuple(centre + 4.0 * radius * back)
+    p.camera.up = tuple(up)
+    p.camera.view_angle = 30.0
+    p.reset_camera()
+    p.camera.zoom(1.3)
+    try:
+        p.enable_anti_aliasing("ssaa")
+    except Exception:  # noqa: BLE001 (anti-aliasing is cosmetic)
+        pass
+    img = p.screenshot(return_img=True)
+    p.close()
+    return img
+
+
+def _render_mpl(ax, S: Surface, view, translucent: set[int]) -> None:
+    """The surface drawn with matplotlib's mplot3d (the fallback engine)."""
+    import matplotlib.colors as mcolors
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    back, right, up = _view_vectors(view)
+    light = back + 0.6 * up - 0.4 * right
+    light /= np.linalg.norm(light)
+    for c in range(S.n_components):
+        pts, faces = S.component_mesh(c)
+        tris = pts[faces]
+        n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        shade = 0.35 + 0.65 * np.clip(n @ light, 0.0, 1.0)
+        base = np.array(mcolors.to_rgb(COLOURS[c % len(COLOURS)]))
+        rgba = np.column_stack([np.clip(shade[:, None] * base, 0, 1),
+                                np.full(len(n), 0.35 if c in translucent else 1.0)])
+        ax.add_collection3d(Poly3DCollection(tris, facecolors=rgba, edgecolors="none"))
+    if S.n_components:
+        lo, hi = S.points.min(axis=0), S.points.max(axis=0)
+    else:
+        lo, hi = S.origin, S.origin + S.L
+    mid, half = 0.5 * (lo + hi), 0.55 * float(np.max(hi - lo))
+    for setter, m in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid, strict=True):
+        setter(m - half, m + half)
+    ax.set_box_aspect((1, 1, 1))
+    ax.view_init(elev=view[1], azim=view[0])
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.set_zlabel("z")
+
+
+def render_shape(phi: np.ndarray, L: float, path: str | Path, *, title: str | None = None,
+                 view: tuple[float, float] = DEFAULT_VIEW, size: tuple[int, int] = (1200, 600),
+                 engine: str = "auto", descriptors: dict | None = None,
+                 slice_y: float | None = None, subtitle: str | None = None) -> Path:
+    """Write a PNG: the 3D membrane {φ = 0} (left) and φ on a plane y = const (right).
+
+    ``phi``: (n, n, n) periodic grid field, φ at (i, j, k)·L/n. ``view``: camera (azimuth,
+    elevation) in degrees, azimuth from +x towards +y, z up. ``size``: (width, height) in
+    pixels. ``descriptors``: a :func:`fem_ade.shape.describe` result to print under the title
+    (computed here if None). ``slice_y``: the section plane (the nearest grid plane is shown;
+    the 3D view marks the section as a dark line). Default: y = L/2, or, if the membrane
+    does not cross it, the plane through the middle of the largest surface. ``subtitle``:
+    text under the title (lines separated by newlines); default: the descriptors' summary.
+    ``engine``: "auto", "vtk" or "matplotlib" (module docstring). Returns the path written.
+    """
+    from matplotlib.figure import Figure
+
+    phi = np.asarray(phi, dtype=float)
+    if phi.ndim != 3 or len(set(phi.shape)) != 1:
+        raise ValueError(f"phi must be an (n, n, n) grid field, got shape {phi.shape}")
+    n = phi.shape[1]
+    h = L / n
+    S = _to_display(extract_surface(phi, L))
+    j = int(round((L / 2 if slice_y is None else slice_y) / h)) % n
+    if slice_y is None and S.n_components and not _crosses(phi[:, j, :]):
+        # y = L/2 misses the membrane: cut through the middle of the largest component
+        pts, _ = S.component_mesh(0)
+        j = int(round(0.5 * (pts[:, 1].min() + pts[:, 1].max()) / h)) % n
+    y_shown = j * h
+    if descriptors is None:
+        descriptors = describe(phi, L, surface=S)
+    translucent = _enclosing(descriptors, S.n_components)
+    engine = choose_engine(engine)
+
+    lines = ([title] if title else []) + (
+        subtitle.splitlines() if subtitle is not None
+        else [summary_line(descriptors)] if descriptors else [])
+    W, H = size
+    dpi = 100
+    fig = Figure(figsize=(W / dpi, H / dpi), dpi=dpi)  # no pyplot: no global state
+    line_h = 26.0 / H  # figure fraction per text line
+    top = 0.97 - line_h * len(lines) - 30.0 / H
+    gs = fig.add_gridspec(1, 2, width_ratios=(1.0, 0.95), left=0.01, right=0.93, bottom=0.09,
+                          top=top, wspace=0.08)
+    # left: 3D view
+    if engine == "vtk":
+        ax3 = fig.add_subplot(gs[0])
+        px = (max(int(W * 0.5 * 2), 64), max(int(H * (top - 0.09) * 2), 64))
+        if S.n_components:
+            img = _render_vtk(S, px, view, _unwrap_y(S, y_shown), translucent)
+            ax3.imshow(img, interpolation="antialiased")
+        ax3.set_axis_off()
+        _draw_triad(ax3, view)
+    else:
+        ax3 = fig.add_subplot(gs[0], projection="3d")
+        _render_mpl(ax3, S, view, translucent)
+    if not S.n_components:
+        ax3.text(0.5, 0.5, "no φ = 0 surface", transform=ax3.transAxes, ha="center")
+    ax3.set_title(f"membrane φ = 0  (view az {view[0]:g}°, el {view[1]:g}°)", fontsize=12)
+
+    # right: section y = const, periodic images closed
+    ax = fig.add_subplot(gs[1])
+    sec = np.pad(phi[:, j, :], ((0, 1), (0, 1)), mode="wrap")
+    xs = np.linspace(0.0, L, n + 1)
+    vmax = max(1.0, float(np.max(np.abs(sec))))
+    pcm = ax.pcolormesh(xs, xs, sec.T, shading="gouraud", cmap="RdBu_r", vmin=-vmax, vmax=vmax,
+                        rasterized=True)
+    if _crosses(sec):
+        ax.contour(xs, xs, sec.T, levels=[0.0], colors="k", linewidths=1.6)
+    ax.set_aspect("equal")
+    ax.set_xlim(0, L)
+    ax.set_ylim(0, L)
+    ax.set_xlabel("x")
+    ax.set_ylabel("z")
+    ax.set_title(f"φ on the plane y = {y_shown:.4g} (black: φ = 0)", fontsize=12)
+    cb = fig.colorbar(pcm, ax=ax, fraction=0.046, pad=0.03)
+    cb.set_label("φ  (+1 inside, −1 outside)")
+
+    for k, line in enumerate(lines):
+        first = k == 0 and bool(title)
+        fig.text(0.5, 0.985 - k * line_h, line, ha="center", va="top",
+                 fontsize=14 if first else 11, fontweight="bold" if first else "normal",
+                 color="black" if first else "#333333")
+    path = Path(path)
+    fig.savefig(path, dpi=dpi)
+    return path
+
+
+def _crosses(a: np.ndarray) -> bool:
+    return bool(a.min() < 0 < a.max())
+
+
+def _to_display(S: Surface) -> Surface:
+    """Translate the (unwrapped) surface by whole periods so that the middle of its bounding
+    box lies in [0, L)³: axis labels then read as box coordinates. In place; returns S."""
+    if S.n_components:
+        centre = 0.5 * (S.points.min(axis=0) + S.points.max(axis=0))
+        offset = -S.L * np.floor(centre / S.L)
+        S.points = S.points + offset
+        S.origin = S.origin + offset  # φ lookups (periodic) follow the points
+    return S
+
+
+def _unwrap_y(S: Surface, y: float) -> float:
+    """The periodic image of the plane y nearest to the middle of the surface."""
+    c = 0.5 * float(S.points[:, 1].min() + S.points[:, 1].max())
+    return y + S.L * round((c - y) / S.L)
+
+
+# --- history ---------------------------------------------------------------------------
+def render_history(history_csv_path: str | Path, path: str | Path, *, alpha: float,
+                   beta: float, delta_A0: float, M1: float | None = None,
+                   M2: float | None = None, title: str | None = None) -> Path:
+    """Write ``history.png`` from ``history.csv``: energies (left; log scale when the parts
+    differ by more than a factor 20) and V/α, A/β, ΔA/ΔA₀ (right) against t.
+
+    E, W, G are read; T₁, T₂ are read if the file has them, else computed as
+    T₁ = M₁(V − α)², T₂ = M₂(A − β)² when ``M1``/``M2`` are given (pass None for an effect
+    that is off), else left out. A part that is 0 throughout (an effect that is off) is left
+    out, and so is ΔA/ΔA₀ if ΔA is 0 throughout or ΔA₀ = 0. Returns the path written.
+    """
+    from matplotlib.figure import Figure
+
+    from .output import read_history
+
+    hist = read_history(history_csv_path)
+    if "t" not in hist or len(hist["t"]) == 0:
+        raise ValueError(f"{history_csv_path} has no rows")
+    t = hist["t"]
+    parts = {"E": hist.get("E"), "W": hist.get("W"), "G": hist.get("G")}
+    for name, M, col, target in (("T1", M1, "V", alpha), ("T2", M2, "A", beta)):
+        if name in hist:
+            parts[name] = hist[name]
+        elif M is not None and col in hist:
+            parts[name] = M * (hist[col] - target) ** 2
+    labels = {"E": "E$_M$ (total)", "W": "W (bending)", "G": "G (ADE)",
+              "T1": "T$_1$ = M$_1$(V−α)²", "T2": "T$_2$ = M$_2$(A−β)²"}
+    styles = {"E": ("k", 2.4), "W": ("#c0392b", 1.5), "G": ("#2c7fb8", 1.5),
+              "T1": ("#27ae60", 1.3), "T2": ("#8e44ad", 1.3)}
+
+    fig = Figure(figsize=(12, 4.8), dpi=100)
+    ax1, ax2 = fig.subplots(1, 2)
+    shown = []
+    for name, v in parts.items():
+        if v is None or not np.any(v != 0):
+            continue
+        colour, lw = styles[name]
+        ax1.plot(t, v, color=colour, lw=lw, label=labels[name],
+                 marker="o" if len(t) < 15 else None, ms=3)
+        shown.append(v[v != 0])
+    values = np.concatenate(shown) if shown else np.ones(1)
+    if np.all(values > 0) and values.max() > 20.0 * values.min():
+        ax1.set_yscale("log")  # parts of very different sizes
+    else:
+        ax1.ticklabel_format(axis="y", useOffset=False)
+    ax1.set_xlabel("t")
+    ax1.set_ylabel("energy")
+    ax1.set_title("energy and its parts")
+    ax1.legend(fontsize=9, loc="best")
+    ax1.grid(True, which="both", alpha=0.25)
+
+    ratios = []
+    if "V" in hist and alpha:
+        ratios.append(("V/α", hist["V"] / alpha, "#27ae60"))
+    if "A" in hist and beta:
+        ratios.append(("A/β", hist["A"] / beta, "#8e44ad"))
+    if "dA" in hist and delta_A0 and np.any(hist["dA"] != 0):
+        ratios.append(("ΔA/ΔA$_0$", hist["dA"] / delta_A0, "#2c7fb8"))
+    for label, v, colour in ratios:
+        ax2.plot(t, v, color=colour, lw=1.8, label=label,
+                 marker="o" if len(t) < 15 else None, ms=3)
+    ax2.axhline(1.0, color="0.4", lw=1.0, ls="--", label="target")
+    ax2.set_xlabel("t")
+    ax2.set_ylabel("ratio to target")
+    ax2.set_title("volume, area and area difference")
+    ax2.legend(fontsize=9, loc="best")
+    ax2.grid(True, alpha=0.25)
+    for ax in (ax1, ax2):
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 3))
+    ax2.ticklabel_format(axis="y", useOffset=False)
+    if title:
+        fig.suptitle(title, fontsize=13, fontweight="bold")
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    return path
+
+
+# --- the command line ------------------------------------------------------------------
+class _BadInput(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit code 2
+        self.exit(2, f"fem_ade.render: error: {message}\n")
+
+
+def _load_run(out: Path) -> tuple[np.ndarray, float, dict]:
+    if not out.is_dir():
+        raise _BadInput(f"{out} is not a folder")
+    for name in ("final.npz", "summary.json", "history.csv"):
+        if not (out / name).is_file():
+            raise _BadInput(f"{out / name} is missing")
+    try:
+        summary = json.loads((out / "summary.json").read_text())
+        params = summary["parameters"]
+        L = float(params["L"])
+    except (ValueError, KeyError, TypeError) as err:
+        raise _BadInput(f"{out / 'summary.json'} is not a run summary ({err})") from None
+    try:
+        with np.load(out / "final.npz") as data:
+            if "phi" not in data or "x" not in data:
+                raise _BadInput(f"{out / 'final.npz'} has no 'phi' and 'x'")
+            phi, x = np.asarray(data["phi"], float), np.asarray(data["x"], float)
+    except (OSError, ValueError) as err:
+        raise _BadInput(f"{out / 'final.npz'} cannot be read ({err})") from None
+    n = x.shape[0] if x.ndim == 1 else -1
+    if phi.ndim != 3 or phi.shape != (n, n, n):
+        raise _BadInput(f"{out / 'final.npz'}: phi of shape {phi.shape} with x of shape "
+                        f"{x.shape} is not a grid field (n, n, n); fields on FEM mesh nodes "
+                        "are not supported yet")
+    if not np.all(np.isfinite(phi)):
+        raise _BadInput(f"{out / 'final.npz'}: phi has non-finite values")
+    return phi, L, summary
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m fem_ade.render OUT [--view AZ EL] [--size W H] [--engine E]``.
+
+    Reads ``OUT/final.npz`` (grid form: ``phi`` (n, n, n) and ``x`` (n,), as the spectral
+    backend writes it; FEM node fields are not supported yet), ``OUT/summary.json`` and
+    ``OUT/history.csv``; writes ``OUT/shape.png`` and ``OUT/history.png`` and prints the
+    shape descriptors. Bad input: one line on stderr, exit code 2.
+    """
+    ap = _Parser(prog="python -m fem_ade.render",
+                 description="Re-render a finished run folder: OUT/shape.png, OUT/history.png.")
+    ap.add_argument("out", help="the run folder (with final.npz, summary.json, history.csv)")
+    ap.add_argument("--view", nargs=2, type=float, metavar=("AZIMUTH", "ELEVATION"),
+                    default=DEFAULT_VIEW, help="camera angles in degrees (default -60 25)")
+    ap.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), default=(1200, 600),
+                    help="shape.png size in pixels (default 1200 600)")
+    ap.add_argument("--engine", choices=ENGINES, default="auto",
+                    help="3D renderer (default auto: VTK if it can render off screen here)")
+    args = ap.parse_args(argv)
+    if min(args.size) < 100:
+        ap.error("--size must be at least 100 100")
+    out = Path(args.out)
+    try:
+        phi, L, summary = _load_run(out)
+    except _BadInput as err:
+        print(f"fem_ade.render: error: {err}", file=sys.stderr)
+        return 2
+    p = summary["parameters"]
+    effects = set(p.get("effects") or ())
+    final = summary.get("final") or {}
+    desc = describe(phi, L, V=final.get("V"), A=final.get("A"),
+                    dA=final.get("dA") if "ade" in effects else None, D=p.get("D"))
+    scene = summary.get("scene", out.name)
+    backend = summary.get("backend", "")
+    steps, t = summary.get("steps"), summary.get("t")
+    when = f"t = {t:.3g} ({steps} steps)" if isinstance(t, (int, float)) else ""
+    title = " — ".join(s for s in (f"{scene} [{backend}, n = {phi.shape[0]}]", when) if s)
+    subtitle = summary_line(desc, given="diffuse, from the diagnostics")
+    try:
+        beta = float(p["beta"])
+        v0 = float(p["alpha"]) / (4.0 * math.pi / 3.0 * (beta / (4.0 * math.pi)) ** 1.5)
+        m0 = float(p["delta_A0"]) / (8.0 * math.pi * float(p["D"])
+                                     * math.sqrt(beta / (4.0 * math.pi)))
+        subtitle += (f"\ntargets α, β{', ΔA₀' if 'ade' in effects else ''}: v = {v0:.3f}"
+                     + (f", Δa = {m0:.3f}" if "ade" in effects else ""))
+    except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        pass
+    render_shape(phi, L, out / "shape.png", title=title, view=tuple(args.view),
+                 size=tuple(args.size), engine=args.engine, descriptors=desc,
+                 subtitle=subtitle)
+    try:
+        render_history(out / "history.csv", out / "history.png", alpha=p["alpha"],
+                       beta=p["beta"], delta_A0=p.get("delta_A0") or 0.0,
+                       M1=p.get("M1") if "volume" in effects else None,
+                       M2=p.get("M2") if "area" in effects else None, title=title)
+    except (ValueError, KeyError, IndexError) as err:
+        print(f"fem_ade.render: error: {out / 'history.csv'}: {err}", file=sys.stderr)
+        return 2
+    print(f"{scene}: " + subtitle.replace("\n", "; "))
+    print(f"wrote {out / 'shape.png'} and {out / 'history.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,100 @@
+"""Pictures without a display (fem_ade.render): shape.png and history.png of a run folder."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from fem_ade.render import main, render_history, render_shape
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def _headless_env(**extra):
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    env.update(extra)
+    return env
+
+
+def _run(module, *args, env=None):
+    return subprocess.run([sys.executable, "-m", module, *map(str, args)], capture_output=True,
+                          text=True, timeout=300, env=env or _headless_env())
+
+
+def _png_size(path):
+    assert path.is_file() and path.stat().st_size > 10_000
+    assert path.read_bytes()[:8] == PNG
+    with Image.open(path) as im:
+        return im.size
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("render") / "sphere"
+    r = _run("fem_ade.run", "sphere", "--n", 32, "--steps", 20, "--every", 5, "--out", out,
+             "--quiet")
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+def test_cli_renders_a_run_folder_without_display(run_dir):
+    r = _run("fem_ade.render", run_dir)
+    assert r.returncode == 0, r.stderr
+    assert _png_size(run_dir / "shape.png") == (1200, 600)
+    _png_size(run_dir / "history.png")
+    assert "1 component, genus 0, arms = 1" in r.stdout
+
+
+def test_cli_view_and_size(run_dir, tmp_path):
+    assert main([str(run_dir), "--view", "30", "60", "--size", "800", "400",
+                 "--engine", "matplotlib"]) == 0
+    assert _png_size(run_dir / "shape.png") == (800, 400)
+
+
+@pytest.mark.parametrize("what", ["no-folder", "no-final", "mesh-field", "bad-summary"])
+def test_cli_bad_input(run_dir, tmp_path, what):
+    out = tmp_path / "run"
+    if what != "no-folder":
+        out.mkdir()
+        for name in ("summary.json", "history.csv", "final.npz"):
+            (out / name).write_bytes((run_dir / name).read_bytes())
+    if what == "no-final":
+        (out / "final.npz").unlink()
+    elif what == "mesh-field":
+        np.savez(out / "final.npz", phi=np.zeros(125), x=np.zeros((125, 3)))
+    elif what == "bad-summary":
+        (out / "summary.json").write_text(json.dumps({"scene": "x"}))
+    r = _run("fem_ade.render", out)
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith("fem_ade.render: error:")
+    assert not (out / "shape.png").exists()
+
+
+def test_render_shape_both_engines(tmp_path):
+    n = 32
+    x = np.arange(n) / n
+    X = np.meshgrid(x, x, x, indexing="ij")
+    r = np.sqrt(sum((Xi - 0.5) ** 2 for Xi in X))
+    phi = np.tanh((0.3 - r) / (np.sqrt(2) * 0.04))
+    for engine in ("auto", "matplotlib"):
+        path = render_shape(phi, 1.0, tmp_path / f"{engine}.png", title="sphere",
+                            engine=engine, size=(900, 450))
+        assert _png_size(path) == (900, 450)
+
+
+def test_render_history_computes_penalties(tmp_path):
+    csv = tmp_path / "history.csv"
+    t = np.linspace(0, 1e-5, 6)
+    rows = ["step,t,E,W,G,V,A,dA"] + [
+        f"{k},{tk!r},{30 - k},{25 - k},{0.1 * (k + 1)},{0.1 + 0.01 * k},{1 - 0.02 * k},0.2"
+        for k, tk in enumerate(t.tolist())]
+    csv.write_text("\n".join(rows) + "\n")
+    path = render_history(csv, tmp_path / "history.png", alpha=0.1, beta=1.0, delta_A0=0.25,
+                          M1=1e5, M2=1e4)
+    _png_size(path)
+    path = render_history(csv, tmp_path / "h2.png", alpha=0.1, beta=1.0, delta_A0=0.0)
+    _png_size(path)

@@ -1,0 +1,76 @@
+"""XDMF time series for ParaView (fem_ade.xdmf), read back with meshio."""
+
+import importlib.util
+import os
+
+import meshio
+import numpy as np
+import pytest
+
+from fem_ade.xdmf import XdmfSeries, periodic_grid, read_series
+
+
+def _field(n, k):
+    x = np.arange(n) / n
+    X = np.meshgrid(x, x, x, indexing="ij")
+    return np.sin(2 * np.pi * X[0]) * np.cos(2 * np.pi * X[2]) + k
+
+
+@pytest.mark.parametrize("fmt", ["XML", "HDF"])
+def test_grid_series_reads_back(tmp_path, fmt, monkeypatch):
+    if fmt == "HDF" and importlib.util.find_spec("h5py") is None:
+        pytest.skip("h5py is not installed")
+    monkeypatch.chdir(tmp_path)  # meshio would put the .h5 in the cwd: it must not matter
+    os.mkdir("elsewhere")
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    n, L, times = 8, 2.0, [0.0, 1e-6, 3e-6]
+    path = tmp_path / "out" / "fields.xdmf"
+    with XdmfSeries.from_grid(path, n, L, data_format=fmt) as series:
+        for k, t in enumerate(times):
+            series.write(t, {"phi": _field(n, k), "mu": -_field(n, k)})
+    assert path.is_file()
+    assert os.listdir(tmp_path / "elsewhere") == []
+
+    with meshio.xdmf.TimeSeriesReader(path) as reader:
+        points, cells = reader.read_points_cells()
+        assert reader.num_steps == len(times)
+        steps = [reader.read_data(k) for k in range(reader.num_steps)]
+    assert points.shape == ((n + 1) ** 3, 3)
+    assert np.allclose(points.min(axis=0), 0.0) and np.allclose(points.max(axis=0), L)
+    assert cells[0].type == "hexahedron" and cells[0].data.shape == (n**3, 8)
+    for k, (t, point_data, _) in enumerate(steps):
+        assert t == pytest.approx(times[k])
+        assert sorted(point_data) == ["mu", "phi"]
+        phi = point_data["phi"].reshape(n + 1, n + 1, n + 1)
+        assert np.allclose(phi[:n, :n, :n], _field(n, k))
+        # periodic images closed: the last layer is a copy of the first, in each direction
+        assert np.array_equal(phi[n], phi[0])
+        assert np.array_equal(phi[:, n], phi[:, 0])
+        assert np.array_equal(phi[:, :, n], phi[:, :, 0])
+
+
+def test_hexahedra_are_valid():
+    import pyvista as pv
+
+    points, cells = periodic_grid(4, 1.0)
+    grid = pv.from_meshio(meshio.Mesh(points, [("hexahedron", cells)]))
+    vols = grid.compute_cell_sizes()["Volume"]
+    assert np.allclose(vols, 1.0 / 64) and grid.volume == pytest.approx(1.0)
+
+
+def test_general_mesh_and_field_checks(tmp_path):
+    points, cells = periodic_grid(2, 1.0)
+    path = tmp_path / "mesh.xdmf"
+    series = XdmfSeries(path, points, [("hexahedron", cells)], data_format="XML")
+    series.write(0.5, {"u": np.arange(len(points), dtype=float)})
+    with pytest.raises(ValueError, match="values for"):
+        series.write(1.0, {"u": np.zeros(3)})
+    series.close()
+    series.close()  # idempotent
+    with pytest.raises(RuntimeError):
+        series.write(2.0, {"u": np.zeros(len(points))})
+    _, _, steps = read_series(path)
+    assert [t for t, _ in steps] == [0.5]
+    assert np.array_equal(steps[0][1]["u"], np.arange(len(points)))
+    with pytest.raises(ValueError, match="data format"):
+        XdmfSeries(tmp_path / "x.xdmf", points, cells, data_format="Binary")
