@@ -53,6 +53,12 @@ class Backend(Protocol):
     def fields(self) -> dict[str, np.ndarray]:
         """Arrays for ``final.npz``: at least ``phi`` and the coordinates it lives on."""
 
+    def output_mesh(self):
+        """(points, cells) for the XDMF series, periodic images closed; None for the grid."""
+
+    def point_data(self) -> dict[str, np.ndarray]:
+        """Fields for one XDMF step: at the points of :meth:`output_mesh` (or on the grid)."""
+
     def info(self) -> dict:
         """JSON-serialisable description (resolution, element, solver...) for summary.json."""
 

@@ -41,6 +41,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -58,7 +59,10 @@ from .output import (
     write_fields,
     write_json_atomic,
 )
+from .render import render_run
 from .scenes import Scene, scene_from_mapping, scene_to_mapping
+from .shape import describe, extract_surface
+from .xdmf import XdmfSeries
 
 PHI_BOUND = 2.0
 
@@ -112,6 +116,7 @@ class RunResult:
     history: list[dict] = field(default_factory=list)
     dt: float = math.nan
     rejected: int = 0
+    shape: dict | None = None
 
     @property
     def exit_code(self) -> int:
@@ -146,20 +151,24 @@ def run_loop(
     adaptive: AdaptiveDt | None = None,
     checkpoint_every: int | None = None,
     on_checkpoint=None,
+    save_every: int | None = None,
+    on_save=None,
     start: LoopState | None = None,
 ) -> RunResult:
     """Advance ``backend`` from ``start`` (default: step 0) and record every ``every`` steps.
 
     ``on_checkpoint(state: LoopState)`` is called every ``checkpoint_every`` steps and on
-    Ctrl-C, with the backend in the state of ``state.k``. Returns a :class:`RunResult`; the
-    backend is left in the last finite state.
+    Ctrl-C, ``on_save(state)`` every ``save_every`` steps (and at the start), each with the
+    backend in the state of ``state.k``. Returns a :class:`RunResult`; the backend is left in
+    the last finite state.
     """
     if (steps is None) == (until_steady is None):
         raise ModelError("give exactly one of steps and until_steady")
     if every < 1:
         raise ModelError(f"--every must be >= 1, got {every}")
-    if checkpoint_every is not None and checkpoint_every < 1:
-        raise ModelError(f"--checkpoint-every must be >= 1, got {checkpoint_every}")
+    for name, value in (("checkpoint-every", checkpoint_every), ("save-every", save_every)):
+        if value is not None and value < 1:
+            raise ModelError(f"--{name} must be >= 1, got {value}")
     total = steps if steps is not None else max_steps
     if total < 0:
         raise ModelError(f"steps must be >= 0, got {total}")
@@ -186,6 +195,8 @@ def run_loop(
     if start is None:
         record(diag)
         ls.last_E = diag["E"]
+    if on_save is not None and save_every:
+        on_save(ls)
     last_diag, last_recorded_E = diag, ls.last_E
     status, message = "completed", ""
     bar = tqdm(total=total, initial=ls.k, disable=quiet, desc=label or "run", unit="step",
@@ -250,6 +261,8 @@ def run_loop(
                     ls.last_E = diag["E"]
             if on_checkpoint is not None and checkpoint_every and ls.k % checkpoint_every == 0:
                 on_checkpoint(ls)
+            if on_save is not None and save_every and ls.k % save_every == 0:
+                on_save(ls)
         else:
             if until_steady is not None:
                 status = "max_steps"
@@ -287,9 +300,32 @@ def _read_checkpoint(out: Path) -> tuple[dict, LoopState]:
     return state, ls
 
 
-def _finish(out: Path, be: Backend, result: RunResult, config: dict) -> None:
-    write_fields(out / "final.npz", be.fields(), step=result.steps, t=result.t, dt=result.dt,
+def _shape(be: Backend, fields: dict, final: dict) -> dict | None:
+    """Shape descriptors of the final φ = 0 surface (3D only; see :mod:`fem_ade.shape`)."""
+    p = be.scene.params
+    phi = fields.get("phi_grid", fields["phi"])
+    if be.scene.dim != 3 or not np.all(np.isfinite(phi)):
+        return None
+    surface = extract_surface(phi, p.L)
+    d = describe(phi, p.L, surface=surface)  # the sharp surface's reduced values: sphere v = 1
+    keys = ("components", "genus", "nested", "reduced_volume", "reduced_area_difference", "arms")
+    shape = {k: d[k] for k in keys}
+    diffuse = describe(phi, p.L, V=final.get("V"), A=final.get("A"),
+                       dA=final.get("dA") if p.on("ade") else None, D=p.D, surface=surface)
+    shape["diffuse"] = {k: diffuse[k] for k in ("reduced_volume", "reduced_area_difference")}
+    shape["sharp"] = d["sharp"]
+    return shape
+
+
+def _finish(out: Path, be: Backend, result: RunResult, config: dict, series) -> None:
+    fields = be.fields()
+    write_fields(out / "final.npz", fields, step=result.steps, t=result.t, dt=result.dt,
                  status=result.status)
+    if series is not None:
+        if series.last_step != result.steps:
+            series.write(result.t, be.point_data())
+        series.close()
+    result.shape = _shape(be, fields, result.final)
     write_json_atomic(out / "summary.json", {
         "scene": config["scene"]["name"],
         "figure": config["scene"]["figure"],
@@ -305,9 +341,16 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict) -> None:
         "status": result.status,
         "message": result.message,
         "final": result.final,
+        "shape": result.shape,
         "wall_s": result.wall_s,
         "versions": package_versions(),
     })
+    if config.get("render", True) and result.shape is not None:
+        try:
+            render_run(out, quiet=True)
+        except Exception as err:  # a picture must never cost the run's results
+            warnings.warn(f"rendering {out} failed: {err}; the run's results are saved",
+                          stacklevel=2)
 
 
 def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
@@ -334,18 +377,46 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
             truncate_history(out / "history.csv", start_ls.k)
             writer = HistoryWriter(out / "history.csv", columns, append=True)
     on_checkpoint = (lambda ls: _write_checkpoint(out, be, ls)) if out is not None else None
+    series = on_save = None
+    if out is not None and config.get("save_every"):
+        name = "phi.xdmf" if start is None else f"phi-from-{start_ls.k}.xdmf"
+        series = _Series(out / name, be)
+        on_save = series.save
     try:
         result = run_loop(
             be, dt=config["dt"], steps=config["steps"], until_steady=config["until_steady"],
             max_steps=config["max_steps"], every=config["every"], quiet=quiet, history=writer,
             label=scene.name, adaptive=adaptive, checkpoint_every=config["checkpoint_every"],
-            on_checkpoint=on_checkpoint, start=start_ls)
+            on_checkpoint=on_checkpoint, save_every=config.get("save_every"), on_save=on_save,
+            start=start_ls)
     finally:
         if writer is not None:
             writer.close()
     if out is not None:
-        _finish(out, be, result, config)
+        _finish(out, be, result, config, series)
     return result
+
+
+class _Series:
+    """The XDMF time series of a run (ParaView): the backend's point data every K steps."""
+
+    def __init__(self, path: Path, be: Backend):
+        mesh = be.output_mesh()
+        if mesh is None:
+            self.xdmf = XdmfSeries.from_grid(path, be.n, be.scene.params.L)
+        else:
+            self.xdmf = XdmfSeries(path, *mesh)
+        self.be, self.last_step = be, None
+
+    def save(self, ls: LoopState) -> None:
+        self.write(ls.t, self.be.point_data())
+        self.last_step = ls.k
+
+    def write(self, t: float, data: dict) -> None:
+        self.xdmf.write(t, data)
+
+    def close(self) -> None:
+        self.xdmf.close()
 
 
 def simulate(
@@ -364,6 +435,8 @@ def simulate(
     scheme: str = "paper",
     adaptive: bool | dict = False,
     checkpoint_every: int | None = None,
+    save_every: int | None = None,
+    render: bool = True,
     out: str | Path | None = None,
     force: bool = False,
     quiet: bool = True,
@@ -372,10 +445,13 @@ def simulate(
 ) -> RunResult:
     """Run ``scene`` with ``backend`` and, if ``out`` is given, write its results there.
 
-    Writes ``out/history.csv`` (row by row), ``out/summary.json``, ``out/final.npz`` (the final
-    field; on divergence the last finite one), ``out/run.json`` (what :func:`resume` needs) and,
-    with ``checkpoint_every``, ``out/checkpoint.npz``. All input is checked before anything is
-    written; bad input raises :class:`fem_ade.model.ModelError`.
+    Writes ``out/history.csv`` (row by row), ``out/summary.json`` (with the shape descriptors
+    of the final surface under ``shape``), ``out/final.npz`` (the final field; on divergence the
+    last finite one), ``out/run.json`` (what :func:`resume` needs), with ``checkpoint_every``
+    ``out/checkpoint.npz``, with ``save_every`` the ParaView series ``out/phi.xdmf`` (+ .h5),
+    and unless ``render=False`` the pictures ``out/shape.png`` and ``out/history.png``.
+    All input is checked before anything is written; bad input raises
+    :class:`fem_ade.model.ModelError`.
 
     ``adaptive=True`` lets Δt range over [Δt/1000, 1000Δt] (the paper's scheme: below ε³/κ);
     a dict gives the fields of :class:`AdaptiveDt`.
@@ -403,6 +479,7 @@ def simulate(
               "steps": steps, "until_steady": until_steady, "max_steps": max_steps,
               "every": every, "ic": ic, "perturb": perturb, "seed": seed, "scheme": scheme,
               "adaptive": adaptive, "checkpoint_every": checkpoint_every,
+              "save_every": save_every, "render": render,
               "backend_options": backend_options or {}}
     return _execute(out, scene, config, quiet=quiet)
 

@@ -381,8 +381,8 @@ def render_history(history_csv_path: str | Path, path: str | Path, *, alpha: flo
 
 
 # --- the command line ------------------------------------------------------------------
-class _BadInput(Exception):
-    pass
+class _BadInput(ValueError):
+    """A run folder that cannot be rendered (one-line message)."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -404,9 +404,10 @@ def _load_run(out: Path) -> tuple[np.ndarray, float, dict]:
         raise _BadInput(f"{out / 'summary.json'} is not a run summary ({err})") from None
     try:
         with np.load(out / "final.npz") as data:
-            if "phi" not in data or "x" not in data:
+            key = "phi_grid" if "phi_grid" in data else "phi"
+            if key not in data or "x" not in data:
                 raise _BadInput(f"{out / 'final.npz'} has no 'phi' and 'x'")
-            phi, x = np.asarray(data["phi"], float), np.asarray(data["x"], float)
+            phi, x = np.asarray(data[key], float), np.asarray(data["x"], float)
     except (OSError, ValueError) as err:
         raise _BadInput(f"{out / 'final.npz'} cannot be read ({err})") from None
     n = x.shape[0] if x.ndim == 1 else -1
@@ -439,17 +440,30 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if min(args.size) < 100:
         ap.error("--size must be at least 100 100")
-    out = Path(args.out)
     try:
-        phi, L, summary = _load_run(out)
+        render_run(args.out, view=tuple(args.view), size=tuple(args.size), engine=args.engine)
     except _BadInput as err:
         print(f"fem_ade.render: error: {err}", file=sys.stderr)
         return 2
+    return 0
+
+
+def render_run(out: str | Path, *, view: tuple[float, float] = DEFAULT_VIEW,
+               size: tuple[int, int] = (1200, 600), engine: str = "auto",
+               descriptors: dict | None = None, quiet: bool = False) -> dict:
+    """Render a run folder: ``OUT/shape.png`` and ``OUT/history.png``; return the descriptors.
+
+    Reads ``final.npz`` (``phi_grid`` or ``phi`` on the uniform grid ``x``), ``summary.json``
+    and ``history.csv``. Raises ``_BadInput`` (a ValueError) on a folder that is not a run.
+    """
+    out = Path(out)
+    phi, L, summary = _load_run(out)
     p = summary["parameters"]
     effects = set(p.get("effects") or ())
     final = summary.get("final") or {}
-    desc = describe(phi, L, V=final.get("V"), A=final.get("A"),
-                    dA=final.get("dA") if "ade" in effects else None, D=p.get("D"))
+    desc = descriptors or describe(phi, L, V=final.get("V"), A=final.get("A"),
+                                   dA=final.get("dA") if "ade" in effects else None,
+                                   D=p.get("D"))
     scene = summary.get("scene", out.name)
     backend = summary.get("backend", "")
     steps, t = summary.get("steps"), summary.get("t")
@@ -465,20 +479,19 @@ def main(argv: list[str] | None = None) -> int:
                      + (f", Δa = {m0:.3f}" if "ade" in effects else ""))
     except (KeyError, TypeError, ValueError, ZeroDivisionError):
         pass
-    render_shape(phi, L, out / "shape.png", title=title, view=tuple(args.view),
-                 size=tuple(args.size), engine=args.engine, descriptors=desc,
-                 subtitle=subtitle)
+    render_shape(phi, L, out / "shape.png", title=title, view=view, size=size, engine=engine,
+                 descriptors=desc, subtitle=subtitle)
     try:
         render_history(out / "history.csv", out / "history.png", alpha=p["alpha"],
                        beta=p["beta"], delta_A0=p.get("delta_A0") or 0.0,
                        M1=p.get("M1") if "volume" in effects else None,
                        M2=p.get("M2") if "area" in effects else None, title=title)
     except (ValueError, KeyError, IndexError) as err:
-        print(f"fem_ade.render: error: {out / 'history.csv'}: {err}", file=sys.stderr)
-        return 2
-    print(f"{scene}: " + subtitle.replace("\n", "; "))
-    print(f"wrote {out / 'shape.png'} and {out / 'history.png'}")
-    return 0
+        raise _BadInput(f"{out / 'history.csv'}: {err}") from None
+    if not quiet:
+        print(f"{scene}: " + subtitle.replace("\n", "; "))
+        print(f"wrote {out / 'shape.png'} and {out / 'history.png'}")
+    return desc
 
 
 if __name__ == "__main__":

@@ -57,6 +57,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="adapt dt: grow while E_M decays, halve on a rejected step")
     p.add_argument("--checkpoint-every", type=int, metavar="K",
                    help="write OUT/checkpoint.npz every K steps (Ctrl-C writes one too)")
+    p.add_argument("--save-every", type=int, metavar="K",
+                   help="write phi (and mu) to the ParaView series OUT/phi.xdmf every K steps")
+    p.add_argument("--no-render", action="store_true",
+                   help="skip OUT/shape.png and OUT/history.png")
     p.add_argument("--out", help="output folder (default: runs/SCENE-BACKEND-TIME)")
     p.add_argument("--force", action="store_true", help="write into a non-empty --out folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -119,7 +123,8 @@ def main(argv: list[str] | None = None) -> int:
             ic=args.ic, perturb=args.perturb, seed=args.seed, out=out, force=args.force,
             quiet=args.quiet, allow_underresolved=args.allow_underresolved,
             backend_options=options, scheme=args.scheme, adaptive=args.adaptive,
-            checkpoint_every=args.checkpoint_every,
+            checkpoint_every=args.checkpoint_every, save_every=args.save_every,
+            render=not args.no_render,
         )
     except ModelError as err:
         print(f"fem_ade.run: error: {err}", file=sys.stderr)
@@ -138,7 +143,15 @@ def _report(name: str, backend: str, result, params: dict, out) -> int:
     print(f"  t = {result.t:.4g}  E = {f['E']:.6g}  W = {f['W']:.6g}  G = {f['G']:.4g}  "
           f"V/alpha = {f['V'] / params['alpha']:.4f}  A/beta = {f['A'] / params['beta']:.4f}  "
           f"dA = {f['dA']:.4g}  ({result.wall_s:.1f} s)")
-    print(f"  results in {out}/ (history.csv, summary.json, final.npz)")
+    if result.shape is not None:
+        d = result.shape
+        genus = ", ".join(map(str, d["genus"])) or "-"
+        print(f"  shape: {d['components']} component(s), genus {genus}"
+              f"{', nested' if d['nested'] else ''}, arms {d['arms']}, reduced volume "
+              f"{d['reduced_volume']:.3f}, reduced area difference "
+              f"{d['reduced_area_difference']:.3f}")
+    written = sorted(p.name for p in Path(out).iterdir()) if Path(out).is_dir() else []
+    print(f"  results in {out}/ ({', '.join(written)})")
     if result.status == "interrupted":
         print(f"  to continue: python -m fem_ade.run --resume {out} [--steps N]", file=stream)
     return result.exit_code

@@ -264,6 +264,12 @@ class SpectralBackend:
         x = np.arange(self.n) * (self.p.L / self.n)
         return {"phi": self.phi, "x": x}
 
+    def output_mesh(self):
+        return None  # the driver writes the periodic grid
+
+    def point_data(self) -> dict:
+        return {"phi": self.phi}
+
     def info(self) -> dict:
         return {"n": self.n, "dim": self.dim, "grid": "uniform periodic",
                 "dofs": self.n**self.dim, "transforms_per_step": 4}

@@ -98,3 +98,26 @@ def test_render_history_computes_penalties(tmp_path):
     _png_size(path)
     path = render_history(csv, tmp_path / "h2.png", alpha=0.1, beta=1.0, delta_A0=0.0)
     _png_size(path)
+
+
+def test_run_writes_series_pictures_and_shape(cli, tmp_path):
+    """Issue 5 'done when': a sphere run writes the XDMF series, both PNGs, and its shape."""
+    from fem_ade.xdmf import read_series
+
+    out = tmp_path / "D"
+    r = cli(["sphere", "--steps", "20", "--every", "5", "--save-every", "10", "--out", out,
+             "--quiet"])
+    assert r.returncode == 0, r.stderr
+    assert "1 component(s), genus 0" in r.stdout
+    for name in ("phi.xdmf", "shape.png", "history.png", "summary.json"):
+        assert (out / name).stat().st_size > 0, name
+    shape = json.loads((out / "summary.json").read_text())["shape"]
+    assert shape["components"] == 1 and shape["genus"] == [0] and not shape["nested"]
+    assert abs(shape["reduced_volume"] - 1) < 0.01
+    points, cells, steps = read_series(out / "phi.xdmf")
+    assert [t for t, _ in steps] == pytest.approx([0.0, 5e-6, 1e-5])
+    assert all(set(d) == {"phi"} for _, d in steps)
+    assert len(points) == 49**3  # n = 48, periodic images closed
+
+    r = cli(["sphere", "--steps", "2", "--no-render", "--out", tmp_path / "E", "--quiet"])
+    assert r.returncode == 0 and not (tmp_path / "E" / "shape.png").exists()
