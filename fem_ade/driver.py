@@ -49,6 +49,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .backend import Backend, make_backend
+from .constraints import ConstraintError
+from .constraints import check as check_constraints
 from .model import HISTORY_COLUMNS, ModelError, check_resolution, diagnose_blowup, max_stable_dt
 from .output import (
     HistoryWriter,
@@ -205,8 +207,11 @@ def run_loop(
     try:
         while ls.k < total:
             good, good_ls = backend.state(), LoopState(**{**asdict(ls), "extra": dict(ls.extra)})
-            extra = backend.step()
-            bad = _guard(backend)
+            try:
+                extra = backend.step()
+                bad = _guard(backend)
+            except ConstraintError as err:
+                extra, bad = {}, str(err)
             is_record = (ls.k + 1) % every == 0 or ls.k + 1 == total
             if bad is None and (is_record or adaptive is not None):
                 diag = backend.diagnostics()
@@ -332,7 +337,8 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict, series) -> 
         "parameters": config["scene"]["params"],
         "backend": be.name,
         "backend_info": be.info(),
-        **{k: config[k] for k in ("n", "dt", "scheme", "ic", "perturb", "seed")},
+        **{k: config.get(k) for k in ("n", "dt", "scheme", "constraints", "ic", "perturb",
+                                      "seed")},
         "adaptive": config["adaptive"],
         "steps": result.steps,
         "t": result.t,
@@ -356,9 +362,14 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict, series) -> 
 def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
              start: tuple[dict, LoopState] | None = None) -> RunResult:
     """Build the backend from ``config`` and run it; the one place simulate/resume share."""
-    be = make_backend(config["backend"], scene, n=config["n"], dt=config["dt"], ic=config["ic"],
-                      perturb=config["perturb"], seed=config["seed"], scheme=config["scheme"],
-                      **config["backend_options"])
+    try:
+        be = make_backend(config["backend"], scene, n=config["n"], dt=config["dt"],
+                          ic=config["ic"], perturb=config["perturb"], seed=config["seed"],
+                          scheme=config["scheme"],
+                          constraints=config.get("constraints", "penalty"),
+                          **config["backend_options"])
+    except ConstraintError as err:
+        raise ModelError(f"the initial condition cannot be projected: {err}") from None
     start_ls = None
     if start is not None:
         state, start_ls = start
@@ -433,6 +444,7 @@ def simulate(
     perturb: float = 0.0,
     seed: int = 0,
     scheme: str = "paper",
+    constraints: str = "penalty",
     adaptive: bool | dict = False,
     checkpoint_every: int | None = None,
     save_every: int | None = None,
@@ -462,6 +474,8 @@ def simulate(
         steps = scene.steps
     if scheme not in SCHEMES:
         raise ModelError(f"unknown scheme {scheme!r}; valid: {', '.join(SCHEMES)}")
+    if check_constraints(constraints) == "exact":  # the penalties are replaced, not added
+        scene = scene.with_(effects=scene.params.effects - {"volume", "area"})
     scene.params.validate()
     check_resolution(scene.params, n, dt, allow_underresolved=allow_underresolved,
                      check_dt=scheme == "paper")
@@ -478,6 +492,7 @@ def simulate(
     config = {"scene": scene_to_mapping(scene), "backend": backend, "n": n, "dt": dt,
               "steps": steps, "until_steady": until_steady, "max_steps": max_steps,
               "every": every, "ic": ic, "perturb": perturb, "seed": seed, "scheme": scheme,
+              "constraints": constraints,
               "adaptive": adaptive, "checkpoint_every": checkpoint_every,
               "save_every": save_every, "render": render,
               "backend_options": backend_options or {}}

@@ -53,6 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheme", choices=("paper", "stabilized"), default="paper",
                    help="paper: the semi-implicit scheme of the paper (default); stabilized: "
                         "linear, one solve per step, energy-stable at >= 100x the paper's dt")
+    p.add_argument("--constraints", choices=("penalty", "exact"), default="penalty",
+                   help="penalty: the paper's M1, M2 terms (default); exact: V = alpha and "
+                        "A = beta held at every step by Lagrange multipliers")
     p.add_argument("--adaptive", action="store_true",
                    help="adapt dt: grow while E_M decays, halve on a rejected step")
     p.add_argument("--checkpoint-every", type=int, metavar="K",
@@ -122,7 +125,8 @@ def main(argv: list[str] | None = None) -> int:
             until_steady=args.until_steady, max_steps=args.max_steps, every=args.every,
             ic=args.ic, perturb=args.perturb, seed=args.seed, out=out, force=args.force,
             quiet=args.quiet, allow_underresolved=args.allow_underresolved,
-            backend_options=options, scheme=args.scheme, adaptive=args.adaptive,
+            backend_options=options, scheme=args.scheme, constraints=args.constraints,
+            adaptive=args.adaptive,
             checkpoint_every=args.checkpoint_every, save_every=args.save_every,
             render=not args.no_render,
         )

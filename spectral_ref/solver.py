@@ -23,6 +23,8 @@ import math
 import numpy as np
 from scipy import fft
 
+from fem_ade.constraints import check as check_constraints
+from fem_ade.constraints import project
 from fem_ade.model import stabilization_coefficients
 
 SQRT2 = math.sqrt(2.0)
@@ -125,7 +127,7 @@ class SpectralBackend:
 
     def __init__(self, scene, *, n: int, dt: float, ic: str = "consistent",
                  perturb: float = 0.0, seed: int = 0, scheme: str = "paper",
-                 workers: int | None = None):
+                 constraints: str = "penalty", workers: int | None = None):
         if scheme not in SCHEMES:
             raise ValueError(f"unknown scheme {scheme!r}; valid: {', '.join(SCHEMES)}")
         self.scene, self.p, self.n, self.scheme = scene, scene.params, n, scheme
@@ -139,6 +141,10 @@ class SpectralBackend:
         phi0 = scene.initial_phi(self.points, ic=ic, perturb=perturb, seed=seed)
         self.k2 = wavenumbers_squared(n, L, self.dim)
         self.set_dt(dt)
+        self.exact = check_constraints(constraints) == "exact"
+        if self.exact:
+            self.extra_columns = ("lambda_V", "lambda_A")
+            phi0 = self._project(phi0)[0]
         self._set_hat(self._fwd(phi0))
 
     def set_dt(self, dt: float) -> None:
@@ -194,7 +200,25 @@ class SpectralBackend:
             self._set_hat((self.phi_hat / self.dt - R_hat) / self.symbol)
         else:
             self._set_hat(self.phi_hat + self._stabilized_increment(R_hat, A, dA))
+        if self.exact:
+            phi, a, b = self._project(self.phi)
+            self._set_hat(self._fwd(phi))
+            return {"lambda_V": -a / self.dt, "lambda_A": -b / self.dt}
         return {}
+
+    def _project(self, phi):
+        """Hold V = α and A = β exactly (fem_ade.constraints): returns (φ, a, b)."""
+        p, dV = self.p, self.dV
+
+        def measure(u):
+            lap = self._inv(-self.k2 * self._fwd(u))
+            f = p.eps * lap - (u * u - 1.0) * u / p.eps
+            return (volume(u, dV), area(u, lap, p, dV), np.full_like(u, 0.5),
+                    -0.75 * SQRT2 * f)
+
+        phi, a, b, _ = project(phi, measure, lambda u, v: dV * float(np.sum(u * v)),
+                               p.alpha, p.beta)
+        return phi, a, b
 
     def _inner(self, a_hat, b_hat) -> float:
         """∫ a b over the box from half-spectra (Parseval with the rfft weights)."""
@@ -272,4 +296,6 @@ class SpectralBackend:
 
     def info(self) -> dict:
         return {"n": self.n, "dim": self.dim, "grid": "uniform periodic",
-                "dofs": self.n**self.dim, "transforms_per_step": 4}
+                "dofs": self.n**self.dim, "scheme": self.scheme,
+                "constraints": "exact" if self.exact else "penalty",
+                "transforms_per_step": 4 if self.scheme == "paper" else 7}
