@@ -192,6 +192,21 @@ def stabilization_coefficients(params: Params, A: float | None, dA: float | None
     return s0, s2
 
 
+def ratchet_stabilization(current: tuple[float, float] | None, required: tuple[float, float]):
+    """The (s₀, s₂) a step uses: keep ``current`` unless ``required`` exceeds it or falls
+    below half of it (then take ``required``).
+
+    Larger coefficients only damp more, so keeping them is safe; the hysteresis lets the FEM
+    backend rebuild its matrix and AMG hierarchy a few times per run instead of every step.
+    Both backends use this rule, so they run the same scheme.
+    """
+    if current is None:
+        return required
+    if any(r > c or r < 0.5 * c for r, c in zip(required, current, strict=True)):
+        return required
+    return current
+
+
 def diagnose_blowup(params: Params, dt: float, last: dict | None) -> str:
     """Name the likely cause of a blow-up from the last finite diagnostics ``last``."""
     causes = []

@@ -25,7 +25,7 @@ from scipy import fft
 
 from fem_ade.constraints import check as check_constraints
 from fem_ade.constraints import project
-from fem_ade.model import stabilization_coefficients
+from fem_ade.model import ratchet_stabilization, stabilization_coefficients
 
 SQRT2 = math.sqrt(2.0)
 
@@ -106,13 +106,12 @@ def area_force(phi, lap, A, p):
 SCHEMES = ("paper", "stabilized")
 
 
-def stabilization_symbol(k2, p, A, dA, dim):
+def stabilization_symbol(k2, p, s0, s2, dim):
     """The diagonal part S of the large-step scheme, added as S(φⁿ⁺¹ − φⁿ) (SPEC §10).
 
     S = s₀ + s₂|k|² (:func:`fem_ade.model.stabilization_coefficients`) + σ_V δ_k0, where
     σ_V = M₁|Ω|/2 is the volume penalty's rank-one Hessian, which acts on the mean only.
     """
-    s0, s2 = stabilization_coefficients(p, A, dA)
     S = s0 + s2 * k2
     if p.on("volume"):
         S[(0,) * dim] += 0.5 * p.M1 * p.L**dim
@@ -141,6 +140,7 @@ class SpectralBackend:
         phi0 = scene.initial_phi(self.points, ic=ic, perturb=perturb, seed=seed)
         self.k2 = wavenumbers_squared(n, L, self.dim)
         self.set_dt(dt)
+        self.stab = None  # (s₀, s₂) in use by the stabilized scheme
         self.exact = check_constraints(constraints) == "exact"
         if self.exact:
             self.extra_columns = ("lambda_V", "lambda_A")
@@ -239,7 +239,8 @@ class SpectralBackend:
         """
         p, phi, lap = self.p, self.phi, self.lap
         L_hat = self.symbol - 1.0 / self.dt
-        d = self.symbol + stabilization_symbol(self.k2, p, A, dA, self.dim)
+        self.stab = ratchet_stabilization(self.stab, stabilization_coefficients(p, A, dA))
+        d = self.symbol + stabilization_symbol(self.k2, p, *self.stab, self.dim)
         y = (-R_hat - L_hat * self.phi_hat) / d
         low_rank = []
         if A is not None and p.M2 > 0:  # g = −(3√2/4) f
@@ -279,10 +280,14 @@ class SpectralBackend:
         return m if math.isfinite(m) else math.nan
 
     def state(self) -> dict:
-        return {"phi_hat": self.phi_hat}  # replaced, never mutated, by step()
+        state = {"phi_hat": self.phi_hat}  # replaced, never mutated, by step()
+        if self.stab is not None:
+            state["stab"] = np.array(self.stab)
+        return state
 
     def set_state(self, state: dict) -> None:
         self._set_hat(np.array(state["phi_hat"]))
+        self.stab = tuple(float(v) for v in state["stab"]) if "stab" in state else None
 
     def fields(self) -> dict:
         x = np.arange(self.n) * (self.p.L / self.n)
