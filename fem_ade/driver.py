@@ -203,10 +203,10 @@ def run_loop(
     status, message = "completed", ""
     bar = tqdm(total=total, initial=ls.k, disable=quiet, desc=label or "run", unit="step",
                mininterval=0.5, dynamic_ncols=True)
-    good, good_ls = None, None
+    good, good_k = None, None
     try:
         while ls.k < total:
-            good, good_ls = backend.state(), LoopState(**{**asdict(ls), "extra": dict(ls.extra)})
+            good, good_k = backend.state(), ls.k
             try:
                 extra = backend.step()
                 bad = _guard(backend)
@@ -273,7 +273,7 @@ def run_loop(
                 status = "max_steps"
                 message = f"not steady after max_steps = {total} steps"
     except KeyboardInterrupt:
-        if good is not None and good_ls is not None and good_ls.k == ls.k:
+        if good is not None and good_k == ls.k:
             backend.set_state(good)  # the interrupted step may be half done
         status = "interrupted"
         message = f"interrupted at step {ls.k}"
