@@ -1,16 +1,21 @@
-"""Exact volume and area constraints (issue 6): a two-scalar Newton projection after each step.
+"""Exact volume and area constraints (issue 6): Lagrange multipliers solved for each step.
 
-With ``constraints="exact"`` the penalties M₁(V − α)² and M₂(A − β)² are off and, after every
-step, φ is corrected along the constraint gradients,
+With ``constraints="exact"`` the penalties M₁(V − α)² and M₂(A − β)² are off and each step
+carries the multipliers of the constraints V(φ) = α, A(φ) = β in its implicit operator P
+(the paper's 1/Δt + 𝓛, or the stabilized one):
 
-    φ ← φ + a g_V + b g_A,   g_V = δV/δφ = ½,   g_A = δA/δφ = −(3√2/4) f(φ),
+    P (φⁿ⁺¹ − φⁿ) = −δE/δφ(φⁿ) − λ_V g_V − λ_A g_A,   g_V = δV/δφ = ½,  g_A = δA/δφ = −(3√2/4)f,
 
-with (a, b) from a 2×2 Newton iteration on V(φ) = α, A(φ) = β (see :func:`project`). The
-Lagrange multipliers of the continuous constrained flow φ_t = −δE/δφ − λ_V g_V − λ_A g_A are
-then λ_V = −a/Δt (a pressure) and λ_A = −b/Δt (a tension); backends report them as the
-history columns ``lambda_V`` and ``lambda_A``.
+so φⁿ⁺¹ = φⁿ + δ₀ − λ_V P⁻¹g_V − λ_A P⁻¹g_A, with δ₀ the unconstrained step and (λ_V, λ_A)
+from a 2×2 Newton iteration on V(φⁿ⁺¹) = α, A(φⁿ⁺¹) = β (:func:`solve_multipliers`). The
+multipliers are the pressure and the tension; backends report them as the history columns
+``lambda_V`` and ``lambda_A``. A steady state then satisfies δE/δφ + λ·g = 0, the
+constrained equilibrium, at any Δt. (Correcting φ along g itself after the step, an L²
+projection, does not: its fixed points satisfy δE/δφ ∈ P·span(g), which depends on Δt;
+measured on ``discocyte``, its steady shape moved with Δt.)
 
-The routine is backend-agnostic: it sees φ only through ``measure`` and ``inner``.
+The initial condition, which may be far from the constraints, is projected once by
+:func:`project` (minimum-norm Newton steps along the current gradients).
 """
 
 from __future__ import annotations
@@ -66,6 +71,38 @@ def project(phi, measure, inner, alpha: float, beta: float, *, tol: float = DEFA
         f"the exact-constraint projection did not converge: |V/alpha - 1| = "
         f"{abs(V / alpha - 1):.2g}, |A/beta - 1| = {abs(A / beta - 1):.2g} after {it} "
         "Newton steps; the state is far from V = alpha, A = beta (reduce dt or use penalties)")
+
+
+def solve_multipliers(measure, alpha: float, beta: float, *, tol: float = DEFAULT_TOL,
+                      maxit: int = 30) -> tuple[float, float, int]:
+    """Find (a, b) with V = α and A = β at φ(a, b) = φ₀ + a z_V + b z_A (fixed directions).
+
+    ``measure(a, b) -> (V, A, J)`` with J the 2×2 Jacobian ∂(V, A)/∂(a, b) = ⟨g_i(φ), z_j⟩.
+    Newton steps are halved while they do not reduce the residual. Returns (a, b, its).
+    """
+    a = b = 0.0
+    V, A, J = measure(a, b)
+    res = _residual(V, A, alpha, beta)
+    for it in range(maxit + 1):
+        if res < tol:
+            return a, b, it
+        try:
+            da, db = np.linalg.solve(J, [alpha - V, beta - A])
+        except np.linalg.LinAlgError:
+            break
+        step = 1.0
+        while step > 1e-4:
+            V1, A1, J1 = measure(a + step * da, b + step * db)
+            res1 = _residual(V1, A1, alpha, beta)
+            if math.isfinite(res1) and res1 < res:
+                break
+            step *= 0.5
+        else:
+            break
+        a, b, V, A, J, res = a + step * da, b + step * db, V1, A1, J1, res1
+    raise ConstraintError(
+        f"the constraint multipliers did not converge: |V/alpha - 1| = {abs(V / alpha - 1):.2g},"
+        f" |A/beta - 1| = {abs(A / beta - 1):.2g} after {it} Newton steps (reduce dt)")
 
 
 def _residual(V, A, alpha, beta) -> float:

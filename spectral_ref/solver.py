@@ -24,7 +24,7 @@ import numpy as np
 from scipy import fft
 
 from fem_ade.constraints import check as check_constraints
-from fem_ade.constraints import project
+from fem_ade.constraints import project, solve_multipliers
 from fem_ade.model import ratchet_stabilization, stabilization_coefficients
 
 SQRT2 = math.sqrt(2.0)
@@ -196,18 +196,44 @@ class SpectralBackend:
         R_hat = self._fwd(P) - self.k2 * self._fwd(Q)
         if p.on("volume"):  # a constant: only the k = 0 mode
             R_hat[(0,) * self.dim] += p.M1 * (volume(phi, dV) - p.alpha) * self.n**self.dim
-        if self.scheme == "paper":
+        if self.scheme == "paper" and not self.exact:
             self._set_hat((self.phi_hat / self.dt - R_hat) / self.symbol)
-        else:
-            self._set_hat(self.phi_hat + self._stabilized_increment(R_hat, A, dA))
-        if self.exact:
-            phi, a, b = self._project(self.phi)
-            self._set_hat(self._fwd(phi))
-            return {"lambda_V": -a / self.dt, "lambda_A": -b / self.dt}
-        return {}
+            return {}
+        solve = self._step_solver(A, dA)
+        delta = solve(-R_hat - (self.symbol - 1.0 / self.dt) * self.phi_hat)
+        if not self.exact:
+            self._set_hat(self.phi_hat + delta)
+            return {}
+        lam_V, lam_A = self._constrained_update(self.phi_hat + delta, solve)
+        return {"lambda_V": lam_V, "lambda_A": lam_A}
+
+    def _constrained_update(self, base_hat, solve):
+        """φⁿ⁺¹ = base − λ_V P⁻¹g_V − λ_A P⁻¹g_A with V = α, A = β (fem_ade.constraints)."""
+        p, dV, phi, lap = self.p, self.dV, self.phi, self.lap
+        gV_hat = np.zeros_like(base_hat)
+        gV_hat[(0,) * self.dim] = 0.5 * self.n**self.dim  # the transform of the constant ½
+        gA_hat = self._fwd(-0.75 * SQRT2 * (p.eps * lap - (phi * phi - 1.0) * phi / p.eps))
+        zs_hat = [solve(gV_hat), solve(gA_hat)]
+        base, lap_base = self._inv(base_hat), self._inv(-self.k2 * base_hat)
+        zs = [(self._inv(z), self._inv(-self.k2 * z)) for z in zs_hat]
+        JV = [0.5 * dV * float(np.sum(z)) for z, _ in zs]  # ⟨½, z⟩
+
+        def fields(a, b):
+            return (base + a * zs[0][0] + b * zs[1][0], lap_base + a * zs[0][1] + b * zs[1][1])
+
+        def measure(a, b):
+            u, lu = fields(a, b)
+            gA = -0.75 * SQRT2 * (p.eps * lu - (u * u - 1.0) * u / p.eps)
+            J = [JV, [dV * float(np.sum(gA * z)) for z, _ in zs]]
+            return volume(u, dV), area(u, lu, p, dV), np.array(J)
+
+        a, b, _ = solve_multipliers(measure, p.alpha, p.beta)
+        self.phi_hat = self._hermitian(base_hat + a * zs_hat[0] + b * zs_hat[1])
+        self.phi, self.lap = fields(a, b)
+        return -a, -b
 
     def _project(self, phi):
-        """Hold V = α and A = β exactly (fem_ade.constraints): returns (φ, a, b)."""
+        """Project the initial φ onto V = α, A = β (fem_ade.constraints.project)."""
         p, dV = self.p, self.dV
 
         def measure(u):
@@ -228,20 +254,19 @@ class SpectralBackend:
             w[-1] = 1.0
         return self.dV / self.n**self.dim * float(np.sum(w * (np.conj(a_hat) * b_hat).real))
 
-    def _stabilized_increment(self, R_hat, A, dA):
-        """δ = φⁿ⁺¹ − φⁿ of the large-step scheme (SPEC §10 recipe, made concrete):
+    def _step_solver(self, A, dA):
+        """P⁻¹ of this step: δ = φⁿ⁺¹ − φⁿ solves P δ = −Rⁿ − 𝓛φⁿ, 𝓛 = κ(εΔ² + (2/ε)Δ).
 
-        (1/Δt + 𝓛 + S) δ + Σᵢ σᵢ gᵢ ⟨gᵢ, δ⟩ = −Rⁿ − 𝓛φⁿ,   𝓛 = κ(εΔ² + (2/ε)Δ),
-
-        S the diagonal of :func:`stabilization_symbol`; the rank-one terms are the Hessians of
-        the penalties, σ gᵢgᵢᵀ: area 2M₂ with g = δA/δφ, ADE κ̄π/(A₀D²) with g = δΔA/δφ.
-        They are solved by Woodbury on top of the diagonal operator.
+        The paper's scheme: P = 1/Δt + 𝓛 (diagonal). The large-step scheme (SPEC §10 recipe,
+        made concrete): P = 1/Δt + 𝓛 + S + Σᵢ σᵢ gᵢ⟨gᵢ, ·⟩, S the diagonal of
+        :func:`stabilization_symbol`, the rank-one terms the Hessians of the penalties: area
+        2M₂ with g = δA/δφ, ADE κ̄π/(A₀D²) with g = δΔA/δφ, applied by Woodbury.
         """
+        if self.scheme == "paper":
+            return lambda rhs: rhs / self.symbol
         p, phi, lap = self.p, self.phi, self.lap
-        L_hat = self.symbol - 1.0 / self.dt
         self.stab = ratchet_stabilization(self.stab, stabilization_coefficients(p, A, dA))
         d = self.symbol + stabilization_symbol(self.k2, p, *self.stab, self.dim)
-        y = (-R_hat - L_hat * self.phi_hat) / d
         low_rank = []
         if A is not None and p.M2 > 0:  # g = −(3√2/4) f
             f_hat = -p.eps * self.k2 * self.phi_hat - self._fwd((phi * phi - 1.0) * phi) / p.eps
@@ -252,13 +277,18 @@ class SpectralBackend:
             g_hat = -0.75 * p.D * (self._fwd(Pg) + self.k2 * self._fwd(phi2))
             low_rank.append((p.kappa_bar * math.pi / (p.A0 * p.D**2), g_hat))
         if not low_rank:
-            return y
+            return lambda rhs: rhs / d
         z = [g / d for _, g in low_rank]
         m = len(low_rank)
         G = np.array([[self._inner(low_rank[i][1], z[j]) for j in range(m)] for i in range(m)])
-        b = np.array([self._inner(g, y) for _, g in low_rank])
-        c = np.linalg.solve(np.diag([1.0 / sig for sig, _ in low_rank]) + G, b)
-        return y - sum(ci * zi for ci, zi in zip(c, z, strict=True))
+        G += np.diag([1.0 / sig for sig, _ in low_rank])
+
+        def solve(rhs):
+            y = rhs / d
+            c = np.linalg.solve(G, [self._inner(g, y) for _, g in low_rank])
+            return y - sum(ci * zi for ci, zi in zip(c, z, strict=True))
+
+        return solve
 
     # -- measurements -----------------------------------------------------------------
     def diagnostics(self) -> dict:
