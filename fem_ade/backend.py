@@ -51,7 +51,9 @@ class Backend(Protocol):
         """Restore a state returned by :meth:`state`."""
 
     def fields(self) -> dict[str, np.ndarray]:
-        """Arrays for ``final.npz``: at least ``phi`` and the coordinates it lives on."""
+        """Arrays for ``final.npz``: at least ``phi`` and the coordinates it lives on; a
+        backend whose ``phi`` is not on the uniform grid x_j = jL/n also gives ``phi_grid``
+        (n per direction) and ``x``, which the shape descriptors and pictures read."""
 
     def output_mesh(self):
         """(points, cells) for the XDMF series, periodic images closed; None for the grid."""

@@ -430,10 +430,13 @@ class _Series:
         self.xdmf.close()
 
 
+MESH_SUFFIXES = (".vtu", ".vtk", ".msh", ".xdmf", ".xml", ".mesh", ".med", ".inp")
+
+
 def simulate(
     scene: Scene,
     *,
-    backend: str = "spectral",
+    backend: str = "fem",
     n: int | None = None,
     dt: float | None = None,
     steps: int | None = None,
@@ -477,8 +480,10 @@ def simulate(
     if check_constraints(constraints) == "exact":  # the penalties are replaced, not added
         scene = scene.with_(effects=scene.params.effects - {"volume", "area"})
     scene.params.validate()
+    options = backend_options or {}
     check_resolution(scene.params, n, dt, allow_underresolved=allow_underresolved,
-                     check_dt=scheme == "paper")
+                     check_dt=scheme == "paper", nodes_per_cell=options.get("order", 1),
+                     check_h=not (options.get("mesh") or "").endswith(MESH_SUFFIXES))
     if perturb < 0:
         raise ModelError(f"--perturb must be >= 0, got {perturb}")
     if until_steady is not None and not until_steady > 0:

@@ -125,10 +125,12 @@ def max_stable_dt(params: Params) -> float:
 
 
 def check_resolution(params: Params, n: int, dt: float, *, allow_underresolved: bool = False,
-                     check_dt: bool = True):
+                     check_dt: bool = True, nodes_per_cell: int = 1, check_h: bool = True):
     """Check the grid size n and the time step dt against the scene (SPEC §4). Raises ModelError.
 
     ``check_dt=False`` skips the Δt < ε³/κ bound (the stabilized scheme has no such bound).
+    The node spacing is L/(n·nodes_per_cell) (2 for Q2); ``check_h=False`` skips the h ≤ ε
+    test (a mesh read from a file, whose spacing n does not describe).
     """
     if not isinstance(n, int) or n < 8:
         raise ModelError(f"n must be an integer >= 8, got {n}")
@@ -140,11 +142,12 @@ def check_resolution(params: Params, n: int, dt: float, *, allow_underresolved: 
             f"dt = {dt:g} >= eps^3/kappa = {limit:g}: the semi-implicit step operator is singular "
             "there (SPEC §4); use a smaller dt or --scheme stabilized"
         )
-    h = params.L / n
-    if h > params.eps and not allow_underresolved:
+    h = params.L / (n * nodes_per_cell)
+    if check_h and h > params.eps and not allow_underresolved:
         raise ModelError(
-            f"grid too coarse for the interface: h = L/n = {h:.4g} > eps = {params.eps:g}; "
-            f"use n >= {math.ceil(params.L / params.eps)} or --allow-underresolved"
+            f"grid too coarse for the interface: node spacing {h:.4g} > eps = {params.eps:g}; "
+            f"use n >= {math.ceil(params.L / (params.eps * nodes_per_cell))} "
+            "or --allow-underresolved"
         )
 
 

@@ -34,8 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", metavar="DIR",
                    help="continue the run in DIR from its checkpoint (up to --steps)")
     p.add_argument("--list", action="store_true", help="list the scenes with their paper figure")
-    p.add_argument("--backend", choices=("fem", "spectral"), default="spectral",
-                   help="discretisation (default: spectral)")
+    p.add_argument("--backend", choices=("fem", "spectral"), default="fem",
+                   help="fem: mixed periodic finite elements (default); spectral: the "
+                        "Fourier reference")
     p.add_argument("--n", type=int, help="cells (grid points) per direction (default: the scene's)")
     p.add_argument("--dt", type=float, help="time step (default: the paper's, per scene)")
     stop = p.add_mutually_exclusive_group()
@@ -71,8 +72,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="allow h = L/n > eps (the interface is not resolved)")
     fem = p.add_argument_group("finite elements (--backend fem)")
     fem.add_argument("--order", type=int, choices=(1, 2), default=1, help="Q1 or Q2 (default 1)")
-    fem.add_argument("--mesh", help="periodic hexahedral mesh file (read with meshio)")
-    fem.add_argument("--solver", default="amg", help="preconditioner (default amg)")
+    fem.add_argument("--mesh", help="a periodic hexahedral mesh file (read with meshio), or "
+                                    "graded[:g] for a graded tensor mesh (default: uniform)")
+    fem.add_argument("--solver", choices=("amg", "chebyshev", "jacobi", "fft", "auto"),
+                     default="amg",
+                     help="preconditioner of the PCG step solve: amg (default; flat iteration "
+                          "counts in h and dt), chebyshev or jacobi (cheap smoothers for the "
+                          "mass-dominated paper dt), fft (uniform Q1 only: exact), auto")
     return p
 
 
@@ -118,8 +124,8 @@ def main(argv: list[str] | None = None) -> int:
         options = {}
         if args.backend == "fem":
             options = {"order": args.order, "mesh": args.mesh, "solver": args.solver}
-        elif args.mesh or args.order != 1:
-            raise ModelError("--mesh and --order apply to --backend fem only")
+        elif args.mesh or args.order != 1 or args.solver != "amg":
+            raise ModelError("--mesh, --order and --solver apply to --backend fem only")
         result = simulate(
             scene, backend=args.backend, n=args.n, dt=args.dt, steps=args.steps,
             until_steady=args.until_steady, max_steps=args.max_steps, every=args.every,

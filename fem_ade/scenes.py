@@ -207,6 +207,14 @@ _TEACHING = [
             "teaching: the same sphere under bending only (W = 16*sqrt(2)*pi/3)"),
 ]
 
+_TEACHING.append(Scene(
+    "ellipse-2d",
+    Params(eps=0.05, alpha=0.2316, beta=0.95 * 1.7311, delta_A0=0.1, effects=PAPER_EFFECTS),
+    2e-6, InitialCondition("ellipsoid", (0.5, 0.5), (0.6, 0.4), c_consistent=0.15,
+                           c_printed=0.15),
+    n=64, dim=2, figure="teaching (2D)",
+    description="teaching: a 2D ellipse with 95 % of its perimeter as target (fast tests)"))
+
 PAPER_SCENES: dict[str, Scene] = {s.name: s for s in _PAPER}
 TEACHING_SCENES: dict[str, Scene] = {s.name: s for s in _TEACHING}
 SCENES: dict[str, Scene] = {**PAPER_SCENES, **TEACHING_SCENES}

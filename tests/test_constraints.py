@@ -58,7 +58,7 @@ def test_projection_converges_quadratically_on_a_sphere():
 def test_unreachable_constraints_fail_clearly(cli, tmp_path):
     """The printed IC (A = 4.5 β) cannot be projected: exit 2 with the reason."""
     r = cli(["discocyte", "--constraints", "exact", "--ic", "printed", "--n", "32",
-             "--out", tmp_path / "never"])
+             "--backend", "spectral", "--out", tmp_path / "never"])
     assert r.returncode == 2 and "cannot be projected" in r.stderr
     assert not (tmp_path / "never").exists()
     with pytest.raises(ConstraintError):

@@ -33,8 +33,8 @@ def test_protocol_and_info(disc16):
 def test_make_backend_by_name():
     b = make_backend("fem", get_scene("discocyte"), n=12, dt=5e-7, order=2, solver="chebyshev")
     assert b.info()["element"] == "Q2"
-    with pytest.raises(ModelError, match="paper's scheme"):
-        make_backend("fem", get_scene("discocyte"), n=12, dt=5e-7, scheme="stabilized")
+    with pytest.raises(ModelError, match="unknown FEM solver"):
+        make_backend("fem", get_scene("discocyte"), n=12, dt=5e-7, solver="lu")
 
 
 def test_state_is_a_snapshot_and_restores():

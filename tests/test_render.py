@@ -106,7 +106,7 @@ def test_run_writes_series_pictures_and_shape(cli, tmp_path):
 
     out = tmp_path / "D"
     r = cli(["sphere", "--steps", "20", "--every", "5", "--save-every", "10", "--out", out,
-             "--quiet"])
+             "--quiet", "--backend", "spectral"])
     assert r.returncode == 0, r.stderr
     assert "1 component(s), genus 0" in r.stdout
     for name in ("phi.xdmf", "shape.png", "history.png", "summary.json"):
@@ -119,5 +119,6 @@ def test_run_writes_series_pictures_and_shape(cli, tmp_path):
     assert all(set(d) == {"phi"} for _, d in steps)
     assert len(points) == 49**3  # n = 48, periodic images closed
 
-    r = cli(["sphere", "--steps", "2", "--no-render", "--out", tmp_path / "E", "--quiet"])
+    r = cli(["sphere", "--steps", "2", "--no-render", "--out", tmp_path / "E", "--quiet",
+             "--backend", "spectral"])
     assert r.returncode == 0 and not (tmp_path / "E" / "shape.png").exists()
