@@ -5,7 +5,9 @@ One step: find φⁿ⁺¹ (and μⁿ⁺¹ = M_L⁻¹Kφⁿ⁺¹, the lumped-mass
     (M_t/Δt − (2κ/ε)K + κε K M_L⁻¹ K) φⁿ⁺¹ = M_t φⁿ/Δt − ⟨Rⁿ, v⟩,
     ⟨Rⁿ, v⟩ = κ⟨N(φⁿ), v⟩ + ⟨h(φⁿ), v⟩ + M₁(Vⁿ − α)(1, v) − (3√2/2)M₂(Aⁿ − β)⟨f(φⁿ), v⟩,
 
-the terms of ⟨Rⁿ, v⟩ being those of :mod:`fem_ade.fem.forms`. Default (``products="nodal"``,
+the terms of ⟨Rⁿ, v⟩ being those of :mod:`fem_ade.fem.forms` (the paper's scheme, SPEC §4; the
+stabilized scheme and exact constraints, which solve for δ = φⁿ⁺¹ − φⁿ, are described in
+:class:`FEMBackend`). Default (``products="nodal"``,
 ``mass="lumped"``): nonlinear products are interpolated at the nodes and every mass product is
 the nodal quadrature M_L = diag(M·1), so ⟨Rⁿ, v⟩ = K a + M_L c (one sparse product) and the step
 matrix is SPD for every Δt < ε³/κ, like the spectral symbol (with the consistent M in the time
@@ -17,19 +19,26 @@ never evaluated. M and K are assembled once (:mod:`fem_ade.fem.assemble`); the s
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..constraints import check as check_constraints
-from ..constraints import project
-from ..model import AREA_FACTOR, ModelError
+from ..constraints import project, solve_multipliers
+from ..model import AREA_FACTOR, ModelError, ratchet_stabilization, stabilization_coefficients
 from ..scenes import Scene
 from . import diagnostics, forms, output
 from . import mesh as fmesh
 from .assemble import operators
-from .solve import StepSolver
+from .solve import StepSolver, _dot
+
+SCHEMES = ("paper", "stabilized")
+
+
+def _norm(x) -> float:
+    return math.sqrt(_dot(x, x))
 
 
 class FEMBackend:
@@ -47,8 +56,24 @@ class FEMBackend:
     - ``mass``: "lumped" (default) or "consistent" mass in the time derivative and products;
     - ``assembly``: "auto" (Kronecker for tensor meshes), "kron" or "skfem".
 
-    ``scheme="stabilized"`` (SPEC §10) is not implemented here and raises ModelError;
-    ``constraints="exact"`` holds V = α and A = β by :func:`fem_ade.constraints.project`.
+    ``scheme="stabilized"``: the large-step scheme of the spectral reference (SPEC §10,
+    :func:`spectral_ref.solver.SpectralBackend._step_solver`) in weak form: δ = φⁿ⁺¹ − φⁿ solves
+
+        [(1/Δt + s₀)M_t + (s₂ − 2κ/ε)K + κε K M_L⁻¹ K + Σᵢ σᵢ bᵢbᵢᵀ] δ = −∇E_h(φⁿ),
+
+    −∇E_h(φⁿ) = −⟨Rⁿ, v⟩ + (2κ/ε)Kφⁿ − κεKμⁿ, (s₀, s₂) from
+    :func:`fem_ade.model.ratchet_stabilization` (kept in :meth:`state`), and the rank-one
+    Hessians of the penalties: volume σ = 2M₁, b = ½M_L·1; area σ = 2M₂, b = ⟨δA/δφ, v⟩; ADE
+    σ = κ̄π/(A₀D²), b = ⟨δΔA/δφ, v⟩ (nodal products, the exact gradients of the discrete A, ΔA).
+    The low-rank terms enter PCG matrix-free; the step matrix is rebuilt only when the
+    ratcheted (s₀, s₂) change, its AMG hierarchy only when the preconditioner's shift moves to
+    another point of its 5 % grid (:data:`fem_ade.fem.solve.SHIFT_GRID`).
+
+    ``constraints="exact"``: V = α and A = β by multipliers inside the step, as the spectral
+    reference (:mod:`fem_ade.constraints`): φⁿ⁺¹ = φⁿ + δ₀ + a z_V + b z_A, z = P⁻¹b (P the
+    scheme's step operator; two extra PCG solves, warm-started from the previous step's z),
+    (a, b) by :func:`fem_ade.constraints.solve_multipliers`; λ_V = −a, λ_A = −b. The initial
+    condition is projected once by :func:`fem_ade.constraints.project`.
     """
 
     name = "fem"
@@ -62,14 +87,16 @@ class FEMBackend:
         t0 = time.perf_counter()
         if order not in (1, 2):
             raise ModelError(f"FEM order must be 1 or 2, got {order}")
-        if scheme != "paper":
-            raise ModelError(f"the FEM backend implements the paper's scheme only (SPEC §4), "
-                             f"not {scheme!r}; use --backend spectral for it")
+        if scheme not in SCHEMES:
+            raise ModelError(f"unknown scheme {scheme!r}; valid: {', '.join(SCHEMES)}")
         if mass not in ("lumped", "consistent"):
             raise ModelError(f"mass must be 'lumped' or 'consistent', got {mass!r}")
         if products not in ("nodal", "quadrature"):
             raise ModelError(f"products must be 'nodal' or 'quadrature', got {products!r}")
         self.scene = scene
+        self.scheme = scheme
+        self.stab: tuple[float, float] | None = None  # (s₀, s₂) of the stabilized scheme
+        self._z: tuple[np.ndarray, np.ndarray] | None = None  # P⁻¹b_V, P⁻¹b_A (exact)
         self.n = n
         self.params = p = scene.params.validate()
         self.dt = float(dt)
@@ -84,32 +111,56 @@ class FEMBackend:
         # the mass of the time derivative and of the explicit products: M_L (default) or M
         self.Mt = sp.diags(self.w).tocsr() if mass == "lumped" else self.M
         t1 = time.perf_counter()
-        self._solver_opts = {"kind": solver, "rtol": rtol}
-        self._solvers: dict[float, StepSolver] = {}
-        self.set_dt(self.dt)
-        t2 = time.perf_counter()
         phi = np.asarray(scene.initial_phi(self.ops.doflocs, ic=ic, perturb=perturb, seed=seed),
                          dtype=float)
         self.exact = check_constraints(constraints) == "exact"
-        if self.exact:  # V = α, A = β held by projection (fem_ade.constraints)
+        if self.exact:  # V = α, A = β: the initial condition is projected once
             self.extra_columns = FEMBackend.extra_columns + ("lambda_V", "lambda_A")
             phi = self._project(phi)[0]
         self._set(phi, None)
+        t2 = time.perf_counter()
+        self._solver_opts = {"kind": solver, "rtol": rtol}
+        self._solvers: dict[tuple, StepSolver] = {}
+        self._preconditioners: dict = {}  # B⁻¹ of M_t + sK by (kind, s), shared (stabilized)
+        self.set_dt(self.dt)
+        t3 = time.perf_counter()
         self._out = None
-        self._setup = {"assembly_s": t1 - t0, "solver_setup_s": t2 - t1,
+        self._setup = {"assembly_s": t1 - t0, "solver_setup_s": t3 - t2,
                        "setup_s": time.perf_counter() - t0}
 
     def set_dt(self, dt: float) -> None:
-        """Change Δt: the step matrix and its preconditioner depend on it (kept per Δt)."""
+        """Change Δt: the step matrix and its preconditioner depend on it (kept per Δt, and
+        for the stabilized scheme per (s₀, s₂); before its first step, at φ⁰'s (s₀, s₂))."""
         self.dt = float(dt)
-        if self.dt not in self._solvers:
+        stab = None
+        if self.scheme == "stabilized":
+            stab = self.stab if self.stab is not None else self._required_stab()
+        self.solver = self._solver_for(stab)
+
+    def _solver_for(self, stab) -> StepSolver:
+        """The StepSolver of (Δt, stab) (stab None: the paper's scheme), cached by value."""
+        key = (self.dt, stab)
+        if key not in self._solvers:
             p = self.params
-            if len(self._solvers) >= 4:  # adaptive Δt: keep the few most recent
+            if len(self._solvers) >= 4:  # adaptive Δt, ratchet: keep the few most recent
                 self._solvers.pop(next(iter(self._solvers)))
-            self._solvers[self.dt] = StepSolver(self.Mt, self.K, self.w, dt=self.dt,
-                                                kappa=p.kappa, eps=p.eps, grid=self._fft_grid(),
-                                                **self._solver_opts)
-        self.solver = self._solvers[self.dt]
+            s0, s2 = (0.0, 0.0) if stab is None else stab
+            self._solvers[key] = StepSolver(self.Mt, self.K, self.w, dt=self.dt, kappa=p.kappa,
+                                            eps=p.eps, grid=self._fft_grid(), s0=s0, s2=s2,
+                                            cache=None if stab is None else self._preconditioners,
+                                            **self._solver_opts)
+        return self._solvers[key]
+
+    def _values(self):
+        """(A, ΔA) at φⁿ, None where the effect (area, ade) is off."""
+        p, phi = self.params, self.phi
+        A = diagnostics.area(phi, self.Kphi, self.w, p.eps) if p.on("area") else None
+        dA = (diagnostics.area_difference(phi, self.Kphi, self.w, p) if p.on("ade")
+              else None)
+        return A, dA
+
+    def _required_stab(self):
+        return stabilization_coefficients(self.params, *self._values())
 
     def _fft_grid(self):
         """(shape, spacing) when the DOFs form a uniform Q1 grid (the ``fft`` solver), else None."""
@@ -129,6 +180,10 @@ class FEMBackend:
         s = {"phi": self.phi.copy(), "mu": self.mu.copy()}
         if self.phi_prev is not None:
             s["phi_prev"] = self.phi_prev.copy()
+        if self.stab is not None:
+            s["stab"] = np.array(self.stab)
+        if self._z is not None:  # the warm starts of the constraint solves
+            s["z_V"], s["z_A"] = self._z[0].copy(), self._z[1].copy()
         return s
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -137,6 +192,9 @@ class FEMBackend:
             raise ModelError(f"state has {phi.size} values, this FEM space has {self.phi.size}")
         prev = state.get("phi_prev")
         self._set(phi, None if prev is None else np.array(prev, dtype=float).ravel())
+        self.stab = (tuple(float(v) for v in state["stab"]) if "stab" in state else None)
+        self._z = ((np.array(state["z_V"], dtype=float).ravel(),
+                    np.array(state["z_A"], dtype=float).ravel()) if "z_V" in state else None)
 
     # -- the step ----------------------------------------------------------------------------
     def explicit_rhs(self) -> np.ndarray:
@@ -177,26 +235,106 @@ class FEMBackend:
         return r
 
     def step(self) -> dict:
-        """One semi-implicit step; returns {"krylov_its", "solve_s"}."""
+        """One step of the scheme; returns {"krylov_its", "solve_s"} (+ λ_V, λ_A when exact).
+
+        ``krylov_its`` and ``solve_s`` count all the step's PCG solves (three when exact).
+        """
+        if self.scheme == "paper" and not self.exact:
+            return self._step_paper()
+        p = self.params
+        rhs = self.explicit_rhs()
+        # −∇E_h(φⁿ) as a functional: −⟨Rⁿ, v⟩ − (−(2κ/ε)K + κεKM_L⁻¹K)φⁿ
+        g = (2.0 * p.kappa / p.eps) * self.Kphi - p.kappa * p.eps * (self.K @ self.mu) - rhs
+        low_rank = ()
+        if self.scheme == "stabilized":
+            A, dA = self._values()
+            self.stab = ratchet_stabilization(self.stab, stabilization_coefficients(p, A, dA))
+            self.solver = self._solver_for(self.stab)
+            low_rank = self._low_rank(A, dA)
+        x0 = np.zeros_like(self.phi) if self.phi_prev is None else self.phi - self.phi_prev
+        t0 = time.perf_counter()
+        delta, its = self.solver.solve(g, x0, ref=np.zeros_like(g),
+                                       scale=_norm(g), low_rank=low_rank)
+        extra = {}
+        base = self.phi + delta
+        if self.exact:
+            base, lam_V, lam_A, its_z = self._constrained_update(base, low_rank)
+            its += its_z
+            extra = {"lambda_V": lam_V, "lambda_A": lam_A}
+        solve_s = time.perf_counter() - t0
+        self._set(base, self.phi)
+        return {"krylov_its": int(its), "solve_s": solve_s, **extra}
+
+    def _step_paper(self) -> dict:
+        """The paper's scheme: S φⁿ⁺¹ = M_t φⁿ/Δt − ⟨Rⁿ, v⟩ (SPEC §4–§5)."""
         p = self.params
         rhs = self.explicit_rhs()
         b = self.Mt @ (self.phi / self.dt) - rhs
         # ‖b − Sφⁿ‖ = ‖−⟨Rⁿ, v⟩ + (2κ/ε)Kφⁿ − κεKμⁿ‖: the size of this step's change
-        scale = np.linalg.norm((2.0 * p.kappa / p.eps) * self.Kphi
-                               - p.kappa * p.eps * (self.K @ self.mu) - rhs)
+        scale = _norm((2.0 * p.kappa / p.eps) * self.Kphi
+                      - p.kappa * p.eps * (self.K @ self.mu) - rhs)
         x0 = self.phi if self.phi_prev is None else 2.0 * self.phi - self.phi_prev
         t0 = time.perf_counter()
         phi_new, its = self.solver.solve(b, x0, ref=self.phi, scale=scale)
         solve_s = time.perf_counter() - t0
-        extra = {"krylov_its": int(its), "solve_s": solve_s}
-        if self.exact:
-            phi_new, a, b = self._project(phi_new)
-            extra.update(lambda_V=-a / self.dt, lambda_A=-b / self.dt)
         self._set(phi_new, self.phi)
-        return extra
+        return {"krylov_its": int(its), "solve_s": solve_s}
+
+    # -- the functionals of the constraints and of the penalties' rank-one Hessians -------------
+    def _nodal(self, a, c):
+        """K a + M_t c: a functional from nodal products, as in :meth:`explicit_rhs`."""
+        return self.K @ a + self.Mt @ c
+
+    def _area_functional(self, u, Ku):
+        """⟨δA/δφ, v⟩ at u: (3√2/4)[ε(∇u, ∇v) + (1/ε)((u² − 1)u, v)].
+
+        With M_t = M_L (the default) this is the exact gradient of the discrete A.
+        """
+        eps = self.params.eps
+        return AREA_FACTOR * (eps * Ku + self.Mt @ ((u * u - 1.0) * u) / eps)
+
+    def _low_rank(self, A, dA):
+        """[(σ, b)]: the rank-one Hessian parts of the penalties made implicit (stabilized)."""
+        p = self.params
+        out = []
+        if p.on("volume") and p.M1 > 0:
+            out.append((2.0 * p.M1, 0.5 * self.w))
+        if A is not None and p.M2 > 0:
+            out.append((2.0 * p.M2, self._area_functional(self.phi, self.Kphi)))
+        if dA is not None and p.kappa_bar > 0:
+            a, c = forms.ade_nodal(self.phi, self.mu, gamma=-0.75 * p.D, eps=p.eps)
+            out.append((p.kappa_bar * math.pi / (p.A0 * p.D**2), self._nodal(a, c)))
+        return out
+
+    def _constrained_update(self, base, low_rank):
+        """φⁿ⁺¹ = base + a z_V + b z_A with V = α, A = β: (φⁿ⁺¹, λ_V, λ_A, PCG its)."""
+        p, w = self.params, self.w
+        bs = [0.5 * w, self._area_functional(self.phi, self.Kphi)]
+        zs, its = [], 0
+        for i, b in enumerate(bs):
+            x0 = np.zeros_like(b) if self._z is None else self._z[i]
+            z, k = self.solver.solve(b, x0, ref=np.zeros_like(b),
+                                     scale=_norm(b), low_rank=low_rank)
+            zs.append(z)
+            its += k
+        self._z = (zs[0], zs[1])
+        Kb, Kz = self.K @ base, [self.K @ z for z in zs]
+        JV = [_dot(bs[0], z) for z in zs]
+
+        def fields(a, b):
+            return base + a * zs[0] + b * zs[1], Kb + a * Kz[0] + b * Kz[1]
+
+        def measure(a, b):
+            u, Ku = fields(a, b)
+            gA = self._area_functional(u, Ku)
+            J = np.array([JV, [_dot(gA, z) for z in zs]])
+            return diagnostics.volume(u, w), diagnostics.area(u, Ku, w, p.eps), J
+
+        a, b, _ = solve_multipliers(measure, p.alpha, p.beta)
+        return fields(a, b)[0], -a, -b, its
 
     def _project(self, phi):
-        """Hold V = α and A = β exactly (:func:`fem_ade.constraints.project`): (φ, a, b)."""
+        """Project the initial φ onto V = α, A = β (:func:`fem_ade.constraints.project`)."""
         p, w = self.params, self.w
 
         def measure(u):
@@ -205,7 +343,7 @@ class FEMBackend:
             return (diagnostics.volume(u, w), diagnostics.area(u, Ku, w, p.eps),
                     np.full_like(u, 0.5), -AREA_FACTOR * f)
 
-        phi, a, b, _ = project(phi, measure, lambda u, v: float(w @ (u * v)), p.alpha, p.beta)
+        phi, a, b, _ = project(phi, measure, lambda u, v: _dot(w, u * v), p.alpha, p.beta)
         return phi, a, b
 
     # -- measurements ------------------------------------------------------------------------
@@ -254,6 +392,8 @@ class FEMBackend:
             "assembly": self.ops.assembly,
             "products": self.products,
             "mass": self.mass,
+            "scheme": self.scheme,
+            "constraints": "exact" if self.exact else "penalty",
             "solver": self.solver.kind,
             "rtol": self.solver.rtol,
             "amg_levels": self.solver.levels,

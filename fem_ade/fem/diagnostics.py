@@ -20,25 +20,26 @@ import math
 import numpy as np
 
 from ..model import AREA_FACTOR, Params
+from .solve import _dot
 
 
 def volume(phi, weights) -> float:
     """V = ∫ (φ + 1)/2 (SPEC §2)."""
-    return 0.5 * float(weights @ (phi + 1.0))
+    return 0.5 * _dot(weights, phi + 1.0)
 
 
 def area(phi, Kphi, weights, eps) -> float:
     """A = (3√2/4) ∫ (ε/2)|∇φ|² + (1/4ε)(φ² − 1)² (SPEC §2)."""
-    grad2 = float(phi @ Kphi)
-    bulk = float(weights @ (phi * phi - 1.0) ** 2)
+    grad2 = _dot(phi, Kphi)
+    bulk = _dot(weights, (phi * phi - 1.0) ** 2)
     return AREA_FACTOR * (0.5 * eps * grad2 + bulk / (4.0 * eps))
 
 
 def area_difference(phi, Kphi, weights, params: Params) -> float:
     """ΔA = −(3D/4) ∫ (1 − φ²)Δφ + (1/ε²) φ(1 − φ²)² (SPEC (2.6)); (1 − φ², Δφ) = (∇φ², ∇φ)."""
     phi2 = phi * phi
-    lap_term = float(phi2 @ Kphi)
-    bulk = float(weights @ (phi * (1.0 - phi2) ** 2)) / params.eps**2
+    lap_term = _dot(phi2, Kphi)
+    bulk = _dot(weights, phi * (1.0 - phi2) ** 2) / params.eps**2
     return -0.75 * params.D * (lap_term + bulk)
 
 
@@ -46,7 +47,7 @@ def bending(phi, mu, weights, params: Params) -> float:
     """W = (κ/2ε) ∫ f_c², f_c = −εμ − (1/ε)(φ² − 1)(φ + Cε) (SPEC (2.1))."""
     eps, C = params.eps, params.C_eff
     fc = -eps * mu - (phi * phi - 1.0) * (phi + C * eps) / eps
-    return params.kappa / (2.0 * eps) * float(weights @ (fc * fc))
+    return params.kappa / (2.0 * eps) * _dot(weights, fc * fc)
 
 
 def ade_energy(dA, params: Params) -> float:
