@@ -160,7 +160,7 @@ def run_loop(
     """Advance ``backend`` from ``start`` (default: step 0) and record every ``every`` steps.
 
     ``on_checkpoint(state: LoopState)`` is called every ``checkpoint_every`` steps and on
-    Ctrl-C, ``on_save(state)`` every ``save_every`` steps (and at the start), each with the
+    Ctrl-C, ``on_save(state)`` at the start and every ``save_every`` steps, each with the
     backend in the state of ``state.k``. Returns a :class:`RunResult`; the backend is left in
     the last finite state.
     """
@@ -197,7 +197,7 @@ def run_loop(
     if start is None:
         record(diag)
         ls.last_E = diag["E"]
-    if on_save is not None and save_every:
+    if on_save is not None:
         on_save(ls)
     last_diag, last_recorded_E = diag, ls.last_E
     status, message = "completed", ""
@@ -389,7 +389,7 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
             writer = HistoryWriter(out / "history.csv", columns, append=True)
     on_checkpoint = (lambda ls: _write_checkpoint(out, be, ls)) if out is not None else None
     series = on_save = None
-    if out is not None and config.get("save_every"):
+    if out is not None:  # the ParaView series: the start, every save_every steps, the end
         name = "phi.xdmf" if start is None else f"phi-from-{start_ls.k}.xdmf"
         series = _Series(out / name, be)
         on_save = series.save
@@ -463,7 +463,8 @@ def simulate(
     Writes ``out/history.csv`` (row by row), ``out/summary.json`` (with the shape descriptors
     of the final surface under ``shape``), ``out/final.npz`` (the final field; on divergence the
     last finite one), ``out/run.json`` (what :func:`resume` needs), with ``checkpoint_every``
-    ``out/checkpoint.npz``, with ``save_every`` the ParaView series ``out/phi.xdmf`` (+ .h5),
+    ``out/checkpoint.npz``, the ParaView series ``out/phi.xdmf`` (+ .h5: the first state, every
+    ``save_every`` steps, the last),
     and unless ``render=False`` the pictures ``out/shape.png`` and ``out/history.png``.
     All input is checked before anything is written; bad input raises
     :class:`fem_ade.model.ModelError`.

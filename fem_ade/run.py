@@ -62,7 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--checkpoint-every", type=int, metavar="K",
                    help="write OUT/checkpoint.npz every K steps (Ctrl-C writes one too)")
     p.add_argument("--save-every", type=int, metavar="K",
-                   help="write phi (and mu) to the ParaView series OUT/phi.xdmf every K steps")
+                   help="add phi (and mu) to the ParaView series OUT/phi.xdmf every K steps "
+                        "(it always holds the first and the last state)")
     p.add_argument("--no-render", action="store_true",
                    help="skip OUT/shape.png and OUT/history.png")
     p.add_argument("--out", help="output folder (default: runs/SCENE-BACKEND-TIME)")

@@ -122,3 +122,21 @@ def test_run_writes_series_pictures_and_shape(cli, tmp_path):
     r = cli(["sphere", "--steps", "2", "--no-render", "--out", tmp_path / "E", "--quiet",
              "--backend", "spectral"])
     assert r.returncode == 0 and not (tmp_path / "E" / "shape.png").exists()
+
+
+def test_default_fem_run_writes_the_series_and_pictures(cli, tmp_path):
+    """Issue 5 'done when', exactly as written: `run sphere --steps 20 --out D` (FEM default)."""
+    import json
+
+    from fem_ade.xdmf import read_series
+
+    out = tmp_path / "D"
+    r = cli(["sphere", "--steps", "20", "--out", out, "--quiet"])
+    assert r.returncode == 0, r.stderr
+    for name in ("phi.xdmf", "shape.png", "history.png"):
+        assert (out / name).stat().st_size > 0, name
+    shape = json.loads((out / "summary.json").read_text())["shape"]
+    assert shape["components"] == 1 and shape["genus"] == [0]
+    _, _, steps = read_series(out / "phi.xdmf")
+    assert [round(t, 12) for t, _ in steps] == [0.0, 1e-5]
+    assert all(set(d) == {"phi", "mu"} for _, d in steps)
