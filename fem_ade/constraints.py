@@ -55,18 +55,18 @@ def project(phi, measure, inner, alpha: float, beta: float, *, tol: float = DEFA
             da, db = np.linalg.solve(J, [alpha - V, beta - A])
         except np.linalg.LinAlgError:
             break
-        step = 1.0
-        while step > 1e-4:
-            trial = phi + step * (da * gV + db * gA)
-            V1, A1, gV1, gA1 = measure(trial)
-            res1 = _residual(V1, A1, alpha, beta)
-            if math.isfinite(res1) and res1 < res:
-                break
-            step *= 0.5
-        else:
+        direction = da * gV + db * gA
+
+        def trial(step, phi=phi, direction=direction):
+            u = phi + step * direction
+            V1, A1, gV1, gA1 = measure(u)
+            return u, V1, A1, gV1, gA1, _residual(V1, A1, alpha, beta)
+
+        found = _backtrack(trial, res)
+        if found is None:
             break
-        phi, a, b = trial, a + step * da, b + step * db
-        V, A, gV, gA, res = V1, A1, gV1, gA1, res1
+        step, (phi, V, A, gV, gA, res) = found
+        a, b = a + step * da, b + step * db
     raise ConstraintError(
         f"the exact-constraint projection did not converge: |V/alpha - 1| = "
         f"{abs(V / alpha - 1):.2g}, |A/beta - 1| = {abs(A / beta - 1):.2g} after {it} "
@@ -90,19 +90,33 @@ def solve_multipliers(measure, alpha: float, beta: float, *, tol: float = DEFAUL
             da, db = np.linalg.solve(J, [alpha - V, beta - A])
         except np.linalg.LinAlgError:
             break
-        step = 1.0
-        while step > 1e-4:
+        def trial(step, a=a, b=b, da=da, db=db):
             V1, A1, J1 = measure(a + step * da, b + step * db)
-            res1 = _residual(V1, A1, alpha, beta)
-            if math.isfinite(res1) and res1 < res:
-                break
-            step *= 0.5
-        else:
+            return V1, A1, J1, _residual(V1, A1, alpha, beta)
+
+        found = _backtrack(trial, res)
+        if found is None:
             break
-        a, b, V, A, J, res = a + step * da, b + step * db, V1, A1, J1, res1
+        step, (V, A, J, res) = found
+        a, b = a + step * da, b + step * db
     raise ConstraintError(
         f"the constraint multipliers did not converge: |V/alpha - 1| = {abs(V / alpha - 1):.2g},"
         f" |A/beta - 1| = {abs(A / beta - 1):.2g} after {it} Newton steps (reduce dt)")
+
+
+def _backtrack(trial, res: float):
+    """Halve a Newton step until it reduces the residual.
+
+    ``trial(step)`` returns a tuple whose last item is the residual there; returns
+    ``(step, trial(step))`` for the first step that reduces ``res``, or None below 1e-4.
+    """
+    step = 1.0
+    while step > 1e-4:
+        out = trial(step)
+        if math.isfinite(out[-1]) and out[-1] < res:
+            return step, out
+        step *= 0.5
+    return None
 
 
 def _residual(V, A, alpha, beta) -> float:

@@ -32,18 +32,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 QUANTITIES = ("E", "V", "A", "W", "dA")
 
 
-def ellipse_2d():
-    """The 2D teaching ellipse (semi-axes 0.3 and 0.245, all effects, targets near φ₀'s)."""
-    from fem_ade.model import Params
-    from fem_ade.scenes import InitialCondition, Scene
-
-    ic = InitialCondition("ellipsoid", (0.5, 0.5), (0.6, 0.4), c_consistent=0.15, c_printed=0.15)
-    params = Params(eps=0.05, alpha=0.2316, beta=0.95 * 1.7311, delta_A0=0.1,
-                    effects=frozenset({"bending", "ade", "volume", "area"}))
-    return Scene("ellipse-2d", params, 2e-6, ic, n=64, dim=2, figure="teaching (2D)",
-                 description="2D ellipse relaxing; FEM/spectral convergence check")
-
-
 def _run(backend, steps):
     for _ in range(steps):
         backend.step()
@@ -100,7 +88,7 @@ def main(argv=None):
     if args.study in ("ellipse-2d", "all"):
         runs = ([("Q1", 1, (32, 48, 64)), ("Q2", 2, (24, 32, 48))] if args.quick else
                 [("Q1", 1, (32, 48, 64, 96, 128)), ("Q2", 2, (24, 32, 48, 64))])
-        results["ellipse-2d"] = study(ellipse_2d(), steps=100, n_ref=256, runs=runs)
+        results["ellipse-2d"] = study(get_scene("ellipse-2d"), steps=100, n_ref=256, runs=runs)
     if args.study in ("discocyte", "all") and not args.quick:
         results["discocyte"] = study(get_scene("discocyte"), steps=50, n_ref=128,
                                      runs=[("Q1", 1, (24, 32, 48, 64))])

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from fem_ade.fem import FEMBackend
-from fem_ade.model import Params
-from fem_ade.scenes import InitialCondition, Scene, get_scene
+from fem_ade.scenes import Scene, get_scene
 
 spectral = pytest.importorskip("spectral_ref.solver")
 
@@ -15,15 +14,8 @@ QUANTITIES = ("E", "V", "A")
 
 
 def ellipse_2d() -> Scene:
-    """A 2D teaching scene: an ellipse (semi-axes 0.3, 0.245) relaxing under all effects.
-
-    The targets are near the initial diffuse values, so the run is smooth at Δt = 2e-6.
-    """
-    ic = InitialCondition("ellipsoid", (0.5, 0.5), (0.6, 0.4), c_consistent=0.15, c_printed=0.15)
-    params = Params(eps=0.05, alpha=0.2316, beta=0.95 * 1.7311, delta_A0=0.1,
-                    effects=frozenset({"bending", "ade", "volume", "area"}))
-    return Scene("ellipse-2d", params, 2e-6, ic, n=64, dim=2, figure="teaching (2D)",
-                 description="2D ellipse relaxing; FEM/spectral convergence check")
+    """The catalogue's 2D teaching ellipse (targets near the initial diffuse values)."""
+    return get_scene("ellipse-2d")
 
 
 def run(backend, steps):
