@@ -414,7 +414,7 @@ class _Series:
     def __init__(self, path: Path, be: Backend):
         mesh = be.output_mesh()
         if mesh is None:
-            self.xdmf = XdmfSeries.from_grid(path, be.n, be.scene.params.L)
+            self.xdmf = XdmfSeries.from_grid(path, be.n, be.scene.params.L, dim=be.scene.dim)
         else:
             self.xdmf = XdmfSeries(path, *mesh)
         self.be, self.last_step = be, None

@@ -68,7 +68,7 @@ class XdmfSeries:
     """
 
     def __init__(self, path: str | Path, points: np.ndarray, cells, *,
-                 data_format: str = "auto", grid_shape: tuple[int, int, int] | None = None):
+                 data_format: str = "auto", grid_shape: tuple[int, ...] | None = None):
         if data_format not in FORMATS:
             raise ValueError(f"unknown XDMF data format {data_format!r}; use one of {FORMATS}")
         if data_format == "auto":
@@ -95,18 +95,26 @@ class XdmfSeries:
 
     @classmethod
     def from_grid(cls, path: str | Path, n: int, L: float, *, data_format: str = "auto",
-                  origin=(0.0, 0.0, 0.0)) -> XdmfSeries:
-        """A series on the periodic n³ grid of period L, periodic images closed
-        (:func:`periodic_grid`); :meth:`write` then takes (n, n, n) fields."""
+                  origin=(0.0, 0.0, 0.0), dim: int = 3) -> XdmfSeries:
+        """A series on the periodic n^dim grid of period L, periodic images closed
+        (:func:`periodic_grid`); :meth:`write` then takes (n,)*dim fields. In 2D the grid is
+        the plane z = 0 of quadrilaterals."""
+        if dim == 2:
+            points, hexes = periodic_grid((n, n, 1), (L, L, 0.0), origin)
+            points = points[::2]  # the layer z = 0 (k = 0 of each (i, j))
+            quads = hexes[:, :4] // 2
+            return cls(path, points, [("quad", quads)], data_format=data_format,
+                       grid_shape=(n, n))
         points, cells = periodic_grid(n, L, origin)
         return cls(path, points, [("hexahedron", cells)], data_format=data_format,
                    grid_shape=(n, n, n))
 
     def _point_values(self, name: str, values) -> np.ndarray:
         a = np.asarray(values, dtype=float)
-        if self.grid_shape is not None and a.shape[:3] == tuple(self.grid_shape):
-            a = np.pad(a, [(0, 1)] * 3 + [(0, 0)] * (a.ndim - 3), mode="wrap")
-            a = a.reshape((-1,) + a.shape[3:])
+        d = 0 if self.grid_shape is None else len(self.grid_shape)
+        if d and a.shape[:d] == tuple(self.grid_shape):
+            a = np.pad(a, [(0, 1)] * d + [(0, 0)] * (a.ndim - d), mode="wrap")
+            a = a.reshape((-1,) + a.shape[d:])
         if a.shape[0] != len(self.points):
             raise ValueError(f"field {name!r} has {a.shape[0]} values for {len(self.points)} "
                              f"points (shape {np.shape(values)})")

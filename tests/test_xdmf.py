@@ -74,3 +74,16 @@ def test_general_mesh_and_field_checks(tmp_path):
     assert np.array_equal(steps[0][1]["u"], np.arange(len(points)))
     with pytest.raises(ValueError, match="data format"):
         XdmfSeries(tmp_path / "x.xdmf", points, cells, data_format="Binary")
+
+
+@pytest.mark.parametrize("backend", ["spectral", "fem"])
+def test_2d_runs_write_a_series(cli, tmp_path, backend):
+    """2D scenes get a series of quadrilaterals (the grid closed periodically, or the mesh)."""
+    out = tmp_path / "E"
+    r = cli(["ellipse-2d", "--backend", backend, "--n", "24", "--steps", "4", "--out", out,
+             "--quiet"])
+    assert r.returncode == 0, r.stderr
+    points, cells, steps = read_series(out / "phi.xdmf")
+    assert len(steps) == 2 and np.all(points[:, 2] == 0)
+    if backend == "spectral":
+        assert len(points) == 25**2
