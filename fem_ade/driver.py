@@ -328,7 +328,7 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict, series) -> 
                  status=result.status)
     if series is not None:
         if series.last_step != result.steps:
-            series.write(result.t, be.point_data())
+            series.save(LoopState(k=result.steps, t=result.t))
         series.close()
     result.shape = _shape(be, fields, result.final)
     write_json_atomic(out / "summary.json", {
@@ -420,11 +420,9 @@ class _Series:
         self.be, self.last_step = be, None
 
     def save(self, ls: LoopState) -> None:
-        self.write(ls.t, self.be.point_data())
+        """Add the backend's current fields at step ``ls.k``, time ``ls.t``."""
+        self.xdmf.write(ls.t, self.be.point_data())
         self.last_step = ls.k
-
-    def write(self, t: float, data: dict) -> None:
-        self.xdmf.write(t, data)
 
     def close(self) -> None:
         self.xdmf.close()
@@ -501,7 +499,7 @@ def simulate(
               "constraints": constraints,
               "adaptive": adaptive, "checkpoint_every": checkpoint_every,
               "save_every": save_every, "render": render,
-              "backend_options": backend_options or {}}
+              "backend_options": options}
     return _execute(out, scene, config, quiet=quiet)
 
 

@@ -97,10 +97,14 @@ def bending_force_explicit(phi, lap, p):
     return kappa * P, kappa * Q
 
 
+def area_gradient(phi, lap, p):
+    """δA/δφ = −(3√2/4) f, f = εΔφ − (1/ε)(φ² − 1)φ (pointwise)."""
+    return -0.75 * SQRT2 * (p.eps * lap - (phi * phi - 1.0) * phi / p.eps)
+
+
 def area_force(phi, lap, A, p):
-    """δT₂/δφ = −(3√2/2) M₂ (A − β) f, f = εΔφ − (1/ε)(φ² − 1)φ (pointwise)."""
-    f = p.eps * lap - (phi * phi - 1.0) * phi / p.eps
-    return -1.5 * SQRT2 * p.M2 * (A - p.beta) * f
+    """δT₂/δφ = 2M₂ (A − β) δA/δφ = −(3√2/2) M₂ (A − β) f."""
+    return 2.0 * p.M2 * (A - p.beta) * area_gradient(phi, lap, p)
 
 
 SCHEMES = ("paper", "stabilized")
@@ -212,7 +216,7 @@ class SpectralBackend:
         p, dV, phi, lap = self.p, self.dV, self.phi, self.lap
         gV_hat = np.zeros_like(base_hat)
         gV_hat[(0,) * self.dim] = 0.5 * self.n**self.dim  # the transform of the constant ½
-        gA_hat = self._fwd(-0.75 * SQRT2 * (p.eps * lap - (phi * phi - 1.0) * phi / p.eps))
+        gA_hat = self._fwd(area_gradient(phi, lap, p))
         zs_hat = [solve(gV_hat), solve(gA_hat)]
         base, lap_base = self._inv(base_hat), self._inv(-self.k2 * base_hat)
         zs = [(self._inv(z), self._inv(-self.k2 * z)) for z in zs_hat]
@@ -223,7 +227,7 @@ class SpectralBackend:
 
         def measure(a, b):
             u, lu = fields(a, b)
-            gA = -0.75 * SQRT2 * (p.eps * lu - (u * u - 1.0) * u / p.eps)
+            gA = area_gradient(u, lu, p)
             J = [JV, [dV * float(np.sum(gA * z)) for z, _ in zs]]
             return volume(u, dV), area(u, lu, p, dV), np.array(J)
 
@@ -238,9 +242,8 @@ class SpectralBackend:
 
         def measure(u):
             lap = self._inv(-self.k2 * self._fwd(u))
-            f = p.eps * lap - (u * u - 1.0) * u / p.eps
             return (volume(u, dV), area(u, lap, p, dV), np.full_like(u, 0.5),
-                    -0.75 * SQRT2 * f)
+                    area_gradient(u, lap, p))
 
         phi, a, b, _ = project(phi, measure, lambda u, v: dV * float(np.sum(u * v)),
                                p.alpha, p.beta)
@@ -268,9 +271,8 @@ class SpectralBackend:
         self.stab = ratchet_stabilization(self.stab, stabilization_coefficients(p, A, dA))
         d = self.symbol + stabilization_symbol(self.k2, p, *self.stab, self.dim)
         low_rank = []
-        if A is not None and p.M2 > 0:  # g = −(3√2/4) f
-            f_hat = -p.eps * self.k2 * self.phi_hat - self._fwd((phi * phi - 1.0) * phi) / p.eps
-            low_rank.append((2.0 * p.M2, -0.75 * SQRT2 * f_hat))
+        if A is not None and p.M2 > 0:  # g = δA/δφ
+            low_rank.append((2.0 * p.M2, self._fwd(area_gradient(phi, lap, p))))
         if dA is not None and p.kappa_bar > 0:  # g = −(3D/4)(−2φΔφ − Δ(φ²) + (1 − 6φ² + 5φ⁴)/ε²)
             phi2 = phi * phi
             Pg = -2.0 * phi * lap + (1.0 - 6.0 * phi2 + 5.0 * phi2 * phi2) / p.eps**2
