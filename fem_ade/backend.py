@@ -1,18 +1,21 @@
-"""What the driver asks of a backend, and how backends are found by name.
+"""What the time loop asks of a backend, what every backend shares, and how one is found.
 
-A backend knows how to build its state from a scene, take one step of the scheme, and
-measure E, W, G, V, A, ΔA (SPEC §6) on its state. It never writes files and never decides
-when to stop: that is the driver's job (:mod:`fem_ade.driver`).
+A backend knows how to build its state from a scene, take one step of a scheme, and measure
+E, W, G, V, A, ΔA (SPEC §6) on its state. It never writes files and never decides when to
+stop: that is the loop's job (:mod:`fem_ade.loop`), and the run folder is :mod:`fem_ade.runs`.
+The backends are listed in :data:`fem_ade.registry.BACKENDS`.
 """
 
 from __future__ import annotations
 
 import importlib
+import math
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from .model import ModelError
+from .model import ModelError, check_resolution
+from .registry import BACKENDS, CONSTRAINTS, SCHEMES
 from .scenes import Scene
 
 
@@ -20,26 +23,32 @@ from .scenes import Scene
 class Backend(Protocol):
     """The interface of a backend (the spectral reference and the FEM implement it).
 
-    Construction: ``Backend(scene, n=..., dt=..., ic=..., perturb=..., seed=..., scheme=...,
-    **options)``; ``scheme`` is ``"paper"`` (SPEC §4) or ``"stabilized"`` (the large-step
-    scheme, see :func:`fem_ade.model.stabilization_coefficients`).
+    Construction: ``Backend(scene, n=..., ic=..., perturb=..., seed=..., scheme=...,
+    constraints=..., dt=None, start_state=None, **options)``. The loop pushes Δt with
+    :meth:`set_dt` before the first step.
     """
 
     #: short name used in the CLI and in summary.json
     name: str
-    #: the scene the backend was built from
+    #: the scene the backend runs: its params are the effective ones (exact constraints:
+    #: no penalty terms)
     scene: Scene
     #: extra history columns this backend appends after step,t,E,W,G,V,A,dA
     extra_columns: tuple[str, ...]
 
+    @classmethod
+    def check(cls, scene: Scene, *, n: int, dt: float, scheme: str, constraints: str,
+              allow_underresolved: bool = False, **options) -> None:
+        """Validate a run before anything is built or written; raise ModelError (one line)."""
+
+    def set_dt(self, dt: float) -> None:
+        """Set the time step (the loop's); rebuild only what depends on it."""
+
     def step(self) -> dict:
         """Advance one step in place; return the values of ``extra_columns`` for this step."""
 
-    def set_dt(self, dt: float) -> None:
-        """Change the time step (adaptive Δt); rebuild whatever depends on it."""
-
     def diagnostics(self) -> dict:
-        """E, W, G, V, A, dA of the current state (terms that are off report 0)."""
+        """E, W, G, V, A, dA (and T1, T2) of the current state (terms that are off report 0)."""
 
     def max_abs_phi(self) -> float:
         """max |φ| over the degrees of freedom (NaN if any is not finite)."""
@@ -48,41 +57,100 @@ class Backend(Protocol):
         """The full state as arrays the backend will not mutate later (for guards, checkpoints)."""
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
-        """Restore a state returned by :meth:`state`."""
+        """Restore a state returned by :meth:`state` (ModelError if it does not fit)."""
 
     def fields(self) -> dict[str, np.ndarray]:
-        """Arrays for ``final.npz``: at least ``phi`` and the coordinates it lives on; a
-        backend whose ``phi`` is not on the uniform grid x_j = jL/n also gives ``phi_grid``
-        (n per direction) and ``x``, which the shape descriptors and pictures read."""
+        """Arrays for ``final.npz``: at least ``phi`` and the coordinates it lives on."""
+
+    def grid_phi(self) -> np.ndarray:
+        """φ on the uniform periodic grid x_j = jL/m, shape (m,)*dim (shape analysis, pictures,
+        and the start of another run: :class:`fem_ade.scenes.InitialCondition` kind "file")."""
 
     def output_mesh(self):
-        """(points, cells) for the XDMF series, periodic images closed; None for the grid."""
+        """(points (P, 3), [(cell type, connectivity)]) for the XDMF series, periodic images
+        closed."""
 
     def point_data(self) -> dict[str, np.ndarray]:
-        """Fields for one XDMF step: at the points of :meth:`output_mesh` (or on the grid)."""
+        """Fields at the points of :meth:`output_mesh` for one XDMF step."""
 
     def info(self) -> dict:
         """JSON-serialisable description (resolution, element, solver...) for summary.json."""
 
 
-#: backend name -> "module:Class"
-BACKENDS = {
-    "spectral": "spectral_ref.solver:SpectralBackend",
-    "fem": "fem_ade.fem.backend:FEMBackend",
-}
+class BackendBase:
+    """What every backend does the same way, and no physics: checking the scheme and
+    constraints, the effective parameters (exact constraints switch the penalties off: a
+    backend built directly is consistent), the initial field, and the resolution check."""
+
+    name = "base"
+    extra_columns: tuple[str, ...] = ()
+    #: extra columns when the constraints are exact (the multipliers)
+    exact_columns = ("lambda_V", "lambda_A")
+
+    def __init__(self, scene: Scene, *, n: int, scheme: str = "paper",
+                 constraints: str = "penalty"):
+        check_choice("scheme", scheme, SCHEMES)
+        self.scheme = scheme
+        self.constraints = constraints
+        params = scene.params.for_constraints(constraints).validate()
+        self.scene = scene if params is scene.params else scene.with_(effects=params.effects)
+        self.params = params
+        self.n = n
+        self.exact = constraints == "exact"
+        if self.exact:
+            self.extra_columns = type(self).extra_columns + self.exact_columns
+        self.dt = math.nan
+
+    @classmethod
+    def check(cls, scene: Scene, *, n: int, dt: float, scheme: str = "paper",
+              constraints: str = "penalty", allow_underresolved: bool = False,
+              **options) -> None:
+        check_choice("scheme", scheme, SCHEMES)
+        check_choice("constraints", constraints, CONSTRAINTS)
+        unknown = set(options) - set(BACKENDS[cls.name].option_names)
+        if unknown:
+            raise ModelError(f"the {cls.name} backend takes no option(s) {sorted(unknown)}")
+        params = scene.params.for_constraints(constraints).validate()
+        nodes = cls.check_options(scene, n, **options)
+        check_resolution(params, n, dt, allow_underresolved=allow_underresolved,
+                         check_dt=scheme == "paper", nodes_per_cell=nodes or 1,
+                         check_h=nodes is not None)
+
+    @classmethod
+    def check_options(cls, scene: Scene, n: int, **options) -> int | None:
+        """Validate the backend's own options (ModelError); return the nodes per cell and
+        direction of the resolution check h = L/(n·nodes) ≤ ε, or None where n does not
+        describe the spacing (a mesh file)."""
+        return 1
+
+    def initial_field(self, points: np.ndarray, *, ic: str, perturb: float,
+                      seed: int) -> np.ndarray:
+        """φ₀ at ``points`` (shape (dim, ...)) from the scene's initial condition."""
+        return self.scene.initial_phi(points, ic=ic, perturb=perturb, seed=seed)
+
+    def max_abs_phi(self) -> float:
+        m = float(np.max(np.abs(self.phi)))
+        return m if math.isfinite(m) else math.nan
+
+
+def check_choice(what: str, value, valid) -> None:
+    """ModelError "unknown WHAT 'value'; valid: ..." unless ``value`` is in ``valid``."""
+    if value not in valid:
+        raise ModelError(f"unknown {what} {value!r}; valid: {', '.join(map(str, valid))}")
+
+
+def backend_class(name: str) -> type:
+    """The class of backend ``name`` (:data:`fem_ade.registry.BACKENDS`), imported on demand."""
+    check_choice("backend", name, BACKENDS)
+    module_name, cls_name = BACKENDS[name].target.split(":")
+    return getattr(importlib.import_module(module_name), cls_name)
+
+
+def check_backend(name: str, scene: Scene, **kwargs) -> None:
+    """Validate a run of backend ``name`` before anything is built (see :meth:`Backend.check`)."""
+    backend_class(name).check(scene, **kwargs)
 
 
 def make_backend(name: str, scene: Scene, **kwargs) -> Backend:
     """Build backend ``name`` for ``scene``. Unknown names raise :class:`ModelError`."""
-    try:
-        target = BACKENDS[name]
-    except KeyError:
-        raise ModelError(f"unknown backend {name!r}; valid: {', '.join(BACKENDS)}") from None
-    module_name, cls_name = target.split(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as err:
-        if err.name and module_name.startswith(err.name):
-            raise ModelError(f"the {name!r} backend is not available yet in this version") from None
-        raise
-    return getattr(module, cls_name)(scene, **kwargs)
+    return backend_class(name)(scene, **kwargs)

@@ -24,9 +24,6 @@ import math
 
 import numpy as np
 
-from .model import ModelError
-
-CONSTRAINTS = ("penalty", "exact")
 DEFAULT_TOL = 1e-10
 
 
@@ -121,9 +118,3 @@ def _backtrack(trial, res: float):
 
 def _residual(V, A, alpha, beta) -> float:
     return max(abs(V / alpha - 1.0), abs(A / beta - 1.0))
-
-
-def check(constraints: str) -> str:
-    if constraints not in CONSTRAINTS:
-        raise ModelError(f"unknown constraints {constraints!r}; valid: {', '.join(CONSTRAINTS)}")
-    return constraints

@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
 
+from .registry import CONSTRAINTS
+
 #: The energy terms a scene can switch on (SPEC §2). ``bending`` is always on.
 EFFECTS = ("bending", "spontaneous_curvature", "ade", "volume", "area")
 
@@ -107,8 +109,76 @@ class Params:
         return self
 
     def with_(self, **changes) -> Params:
-        """A copy with some fields changed (D and A0 are re-derived if they were derived)."""
+        """A copy with some fields changed.
+
+        D and A₀ follow ε and β when they were derived from them (D = 2ε/3, A₀ = β) and the
+        change does not set them itself.
+        """
+        if "eps" in changes and "D" not in changes and self.D == 2.0 * self.eps / 3.0:
+            changes["D"] = None
+        if "beta" in changes and "A0" not in changes and self.A0 == self.beta:
+            changes["A0"] = None
         return replace(self, **changes)
+
+    def for_constraints(self, constraints: str) -> Params:
+        """The parameters a run with ``constraints`` uses: exact constraints replace the
+        volume and area penalties, they are not added to them (SPEC §2, issue 6)."""
+        if constraints not in CONSTRAINTS:
+            raise ModelError(f"unknown constraints {constraints!r}; "
+                             f"valid: {', '.join(CONSTRAINTS)}")
+        if constraints == "exact":
+            return self.with_(effects=self.effects - {"volume", "area"})
+        return self
+
+    # -- the scalar parts of E_M (SPEC §2): one home for both backends -------------------
+    # Each term below depends on φ only through one functional (V, A or ΔA), which each
+    # backend computes on its own fields; its force is (slope) × (the functional's gradient).
+    def volume_energy(self, V: float) -> float:
+        """T₁ = M₁(V − α)²."""
+        return self.M1 * (V - self.alpha) ** 2
+
+    def volume_slope(self, V: float) -> float:
+        """dT₁/dV = 2M₁(V − α); its second derivative, the rank-one Hessian's σ, is 2M₁."""
+        return 2.0 * self.M1 * (V - self.alpha)
+
+    def area_energy(self, A: float) -> float:
+        """T₂ = M₂(A − β)²."""
+        return self.M2 * (A - self.beta) ** 2
+
+    def area_slope(self, A: float) -> float:
+        """dT₂/dA = 2M₂(A − β); its second derivative is 2M₂."""
+        return 2.0 * self.M2 * (A - self.beta)
+
+    def area_force_scale(self, A: float) -> float:
+        """c_A = (3√2/2)M₂(A − β): the area penalty's force is δT₂/δφ = −c_A f (SPEC §3)."""
+        return 1.5 * SQRT2 * self.M2 * (A - self.beta)
+
+    @property
+    def ade_modulus(self) -> float:
+        """κ̄π/(A₀D²): G = ½·ade_modulus·(ΔA − ΔA₀)², the second derivative of G in ΔA."""
+        return self.kappa_bar * math.pi / (self.A0 * self.D**2)
+
+    def ade_energy(self, dA: float) -> float:
+        """G = (κ̄π / (2A₀D²)) (ΔA − ΔA₀)²   (paper 2.7)."""
+        return self.kappa_bar * math.pi / (2.0 * self.A0 * self.D**2) * (dA - self.delta_A0) ** 2
+
+    def ade_force_coefficient(self, dA: float) -> float:
+        """γ = −(3κ̄π/(4A₀D))(ΔA − ΔA₀) = (dG/dΔA)·(−3D/4): the ADE force (SPEC §3) is
+        h = γ(−2φΔφ − Δ(φ²) + (1/ε²)(1 − 6φ² + 5φ⁴)), δΔA/δφ being −(3D/4) times the bracket."""
+        return -0.75 * self.kappa_bar * math.pi / (self.A0 * self.D) * (dA - self.delta_A0)
+
+    def energy(self, W: float, V: float, A: float, dA: float | None) -> dict:
+        """E_M and its parts from W and the functionals (terms that are off report 0)."""
+        G = self.ade_energy(dA) if self.on("ade") else 0.0
+        T1 = self.volume_energy(V) if self.on("volume") else 0.0
+        T2 = self.area_energy(A) if self.on("area") else 0.0
+        return {"E": W + G + T1 + T2, "W": W, "G": G, "V": V, "A": A,
+                "dA": dA if self.on("ade") else 0.0, "T1": T1, "T2": T2}
+
+    def reduced_targets(self) -> tuple[float, float]:
+        """(v₀, Δa₀): the reduced volume and area difference the targets α, β, ΔA₀ describe."""
+        return (reduced_volume(self.alpha, self.beta),
+                reduced_area_difference(self.delta_A0, self.beta, self.D))
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -117,6 +187,16 @@ class Params:
 
 
 PARAM_FIELDS = {f.name for f in fields(Params)}
+
+
+def reduced_volume(V: float, A: float) -> float:
+    """v = V / (4π/3 (A/4π)^{3/2}): 1 for a sphere."""
+    return V / (4.0 * math.pi / 3.0 * (A / (4.0 * math.pi)) ** 1.5) if A > 0 else math.nan
+
+
+def reduced_area_difference(dA: float, A: float, D: float) -> float:
+    """Δa = ΔA / (8πD √(A/4π)): 1 for a sphere (ΔA = 8πDR)."""
+    return dA / (8.0 * math.pi * D * math.sqrt(A / (4.0 * math.pi))) if A > 0 else math.nan
 
 
 def max_stable_dt(params: Params) -> float:
@@ -159,7 +239,7 @@ def explicit_area_dt_bound(params: Params, A: float) -> tuple[float, float]:
     of wavenumber k stays bounded while Δt((c + 2κ/ε)k² − κεk⁴) ≤ 2; the worst k gives
     Δt ≤ 8κε / (c + 2κ/ε)². Returns (c, bound); bound is inf when c ≤ 0.
     """
-    c = 1.5 * SQRT2 * params.M2 * (A - params.beta) * params.eps
+    c = params.area_force_scale(A) * params.eps
     if c <= 0 or not params.on("area"):
         return c, math.inf
     bound = 8.0 * params.kappa * params.eps / (c + 2.0 * params.kappa / params.eps) ** 2
@@ -185,11 +265,11 @@ def stabilization_coefficients(params: Params, A: float | None, dA: float | None
     s0 = 8.0 * p.kappa / p.eps**3
     s2 = 6.0 * p.kappa / p.eps
     if A is not None:
-        cA = 1.5 * SQRT2 * p.M2 * abs(A - p.beta)
+        cA = abs(p.area_force_scale(A))
         s0 += 2.0 * cA / p.eps
         s2 += cA * p.eps
     if dA is not None:
-        cG = 0.75 * p.kappa_bar * math.pi / (p.A0 * p.D) * abs(dA - p.delta_A0)
+        cG = abs(p.ade_force_coefficient(dA))
         s0 += 8.0 * cG / p.eps**2
         s2 += 4.0 * cG
     return s0, s2

@@ -1,6 +1,7 @@
 """Everything the project writes: history.csv, summary.json, final.npz (and the output folder).
 
-Backends never write files; the driver hands rows and fields to the writers here.
+Backends never write files; the run folder (:mod:`fem_ade.runs`) hands rows and fields to the
+writers here.
 """
 
 from __future__ import annotations
@@ -108,8 +109,9 @@ def read_history(path: str | Path) -> dict[str, np.ndarray]:
     return {c: np.array([float(r[i]) for r in body]) for i, c in enumerate(header)}
 
 
-def truncate_history(path: str | Path, last_step: int) -> None:
-    """Drop the rows of history.csv after ``last_step`` (before a resumed run appends)."""
+def truncate_history(path: str | Path, last_step: int) -> list[dict]:
+    """Drop the rows of history.csv after ``last_step`` (before a resumed run appends);
+    return the rows kept, as dicts of floats."""
     path = Path(path)
     with open(path, newline="") as f:
         rows = list(csv.reader(f))
@@ -118,6 +120,7 @@ def truncate_history(path: str | Path, last_step: int) -> None:
     with open(tmp, "w", newline="") as f:
         csv.writer(f).writerows(keep)
     os.replace(tmp, path)
+    return [{c: float(v) for c, v in zip(rows[0], r, strict=True)} for r in keep[1:]]
 
 
 def read_json(path: str | Path) -> dict:

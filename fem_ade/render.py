@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .model import Params
 from .shape import Surface, describe, extract_surface, summary_line
 
 ENGINES = ("auto", "vtk", "matplotlib")
@@ -195,7 +196,8 @@ def _render_mpl(ax, S: Surface, view, translucent: set[int]) -> None:
 def render_shape(phi: np.ndarray, L: float, path: str | Path, *, title: str | None = None,
                  view: tuple[float, float] = DEFAULT_VIEW, size: tuple[int, int] = (1200, 600),
                  engine: str = "auto", descriptors: dict | None = None,
-                 slice_y: float | None = None, subtitle: str | None = None) -> Path:
+                 slice_y: float | None = None, subtitle: str | None = None,
+                 surface: Surface | None = None) -> Path:
     """Write a PNG: the 3D membrane {φ = 0} (left) and φ on a plane y = const (right).
 
     ``phi``: (n, n, n) periodic grid field, φ at (i, j, k)·L/n. ``view``: camera (azimuth,
@@ -205,7 +207,9 @@ def render_shape(phi: np.ndarray, L: float, path: str | Path, *, title: str | No
     the 3D view marks the section as a dark line). Default: y = L/2, or, if the membrane
     does not cross it, the plane through the middle of the largest surface. ``subtitle``:
     text under the title (lines separated by newlines); default: the descriptors' summary.
-    ``engine``: "auto", "vtk" or "matplotlib" (module docstring). Returns the path written.
+    ``engine``: "auto", "vtk" or "matplotlib" (module docstring). ``surface``: the
+    :func:`fem_ade.shape.extract_surface` of ``phi`` if the caller has it (it is moved to
+    display coordinates here). Returns the path written.
     """
     from matplotlib.figure import Figure
 
@@ -214,7 +218,7 @@ def render_shape(phi: np.ndarray, L: float, path: str | Path, *, title: str | No
         raise ValueError(f"phi must be an (n, n, n) grid field, got shape {phi.shape}")
     n = phi.shape[1]
     h = L / n
-    S = _to_display(extract_surface(phi, L))
+    S = _to_display(surface if surface is not None else extract_surface(phi, L))
     j = int(round((L / 2 if slice_y is None else slice_y) / h)) % n
     if slice_y is None and S.n_components and not _crosses(phi[:, j, :]):
         # y = L/2 misses the membrane: cut through the middle of the largest component
@@ -302,31 +306,31 @@ def _unwrap_y(S: Surface, y: float) -> float:
 
 
 # --- history ---------------------------------------------------------------------------
-def render_history(history_csv_path: str | Path, path: str | Path, *, alpha: float,
-                   beta: float, delta_A0: float, M1: float | None = None,
-                   M2: float | None = None, title: str | None = None) -> Path:
-    """Write ``history.png`` from ``history.csv``: energies (left; log scale when the parts
-    differ by more than a factor 20) and V/α, A/β, ΔA/ΔA₀ (right) against t.
+def render_history(history, path: str | Path, params: Params, *,
+                   title: str | None = None) -> Path:
+    """Write ``history.png``: energies (left; log scale when the parts differ by more than a
+    factor 20) and V/α, A/β, ΔA/ΔA₀ (right) against t.
 
-    E, W, G are read; T₁, T₂ are read if the file has them, else computed as
-    T₁ = M₁(V − α)², T₂ = M₂(A − β)² when ``M1``/``M2`` are given (pass None for an effect
-    that is off), else left out. A part that is 0 throughout (an effect that is off) is left
-    out, and so is ΔA/ΔA₀ if ΔA is 0 throughout or ΔA₀ = 0. Returns the path written.
+    ``history``: the columns of ``history.csv`` (a dict of arrays, or the file's path).
+    E, W, G are read; T₁ = M₁(V − α)², T₂ = M₂(A − β)² are computed from V, A when their
+    effect is on (``params``). A part that is 0 throughout (an effect that is off) is left out,
+    and so is ΔA/ΔA₀ if ΔA is 0 throughout or ΔA₀ = 0. Returns the path written.
     """
     from matplotlib.figure import Figure
 
     from .output import read_history
 
-    hist = read_history(history_csv_path)
+    hist = read_history(history) if isinstance(history, (str, Path)) else history
     if "t" not in hist or len(hist["t"]) == 0:
-        raise ValueError(f"{history_csv_path} has no rows")
+        raise ValueError("the history has no rows")
+    hist = {k: np.asarray(v, dtype=float) for k, v in hist.items()}
     t = hist["t"]
+    alpha, beta, delta_A0 = params.alpha, params.beta, params.delta_A0
     parts = {"E": hist.get("E"), "W": hist.get("W"), "G": hist.get("G")}
-    for name, M, col, target in (("T1", M1, "V", alpha), ("T2", M2, "A", beta)):
-        if name in hist:
-            parts[name] = hist[name]
-        elif M is not None and col in hist:
-            parts[name] = M * (hist[col] - target) ** 2
+    if params.on("volume") and "V" in hist:
+        parts["T1"] = params.volume_energy(hist["V"])
+    if params.on("area") and "A" in hist:
+        parts["T2"] = params.area_energy(hist["A"])
     labels = {"E": "E$_M$ (total)", "W": "W (bending)", "G": "G (ADE)",
               "T1": "T$_1$ = M$_1$(V−α)²", "T2": "T$_2$ = M$_2$(A−β)²"}
     styles = {"E": ("k", 2.4), "W": ("#c0392b", 1.5), "G": ("#2c7fb8", 1.5),
@@ -450,48 +454,61 @@ def main(argv: list[str] | None = None) -> int:
 
 def render_run(out: str | Path, *, view: tuple[float, float] = DEFAULT_VIEW,
                size: tuple[int, int] = (1200, 600), engine: str = "auto",
-               descriptors: dict | None = None, quiet: bool = False) -> dict:
-    """Render a run folder: ``OUT/shape.png`` and ``OUT/history.png``; return the descriptors.
+               quiet: bool = False) -> dict:
+    """Re-render a run folder from its files: ``OUT/shape.png`` and ``OUT/history.png``;
+    return the descriptors.
 
     Reads ``final.npz`` (``phi_grid`` or ``phi`` on the uniform grid ``x``), ``summary.json``
     and ``history.csv``. Raises ``_BadInput`` (a ValueError) on a folder that is not a run.
     """
+    from .output import read_history
+
     out = Path(out)
     phi, L, summary = _load_run(out)
-    p = summary["parameters"]
-    effects = set(p.get("effects") or ())
+    try:
+        params = Params(**{**summary["parameters"],
+                           "effects": frozenset(summary["parameters"]["effects"])})
+        history = read_history(out / "history.csv")
+    except (KeyError, TypeError, ValueError, IndexError) as err:
+        raise _BadInput(f"{out} is not a complete run folder ({err})") from None
     final = summary.get("final") or {}
-    desc = descriptors or describe(phi, L, V=final.get("V"), A=final.get("A"),
-                                   dA=final.get("dA") if "ade" in effects else None,
-                                   D=p.get("D"))
-    scene = summary.get("scene", out.name)
-    backend = summary.get("backend", "")
+    desc = describe(phi, L, V=final.get("V"), A=final.get("A"),
+                    dA=final.get("dA") if params.on("ade") else None, D=params.D)
+    return draw_run(out, phi, params, history, desc, label=run_label(summary, phi.shape[0]),
+                    view=view, size=size, engine=engine, quiet=quiet)
+
+
+def run_label(summary: dict, n_grid: int) -> str:
+    """The title of a run's pictures: scene, backend, grid, time, and a divergence if any."""
     steps, t = summary.get("steps"), summary.get("t")
     when = f"t = {t:.3g} ({steps} steps)" if isinstance(t, (int, float)) else ""
-    title = " — ".join(s for s in (f"{scene} [{backend}, n = {phi.shape[0]}]", when) if s)
-    subtitle = summary_line(desc, given="diffuse, from the diagnostics")
-    try:
-        beta = float(p["beta"])
-        v0 = float(p["alpha"]) / (4.0 * math.pi / 3.0 * (beta / (4.0 * math.pi)) ** 1.5)
-        m0 = float(p["delta_A0"]) / (8.0 * math.pi * float(p["D"])
-                                     * math.sqrt(beta / (4.0 * math.pi)))
-        subtitle += (f"\ntargets α, β{', ΔA₀' if 'ade' in effects else ''}: v = {v0:.3f}"
-                     + (f", Δa = {m0:.3f}" if "ade" in effects else ""))
-    except (KeyError, TypeError, ValueError, ZeroDivisionError):
-        pass
-    render_shape(phi, L, out / "shape.png", title=title, view=view, size=size, engine=engine,
-                 descriptors=desc, subtitle=subtitle)
-    try:
-        render_history(out / "history.csv", out / "history.png", alpha=p["alpha"],
-                       beta=p["beta"], delta_A0=p.get("delta_A0") or 0.0,
-                       M1=p.get("M1") if "volume" in effects else None,
-                       M2=p.get("M2") if "area" in effects else None, title=title)
-    except (ValueError, KeyError, IndexError) as err:
-        raise _BadInput(f"{out / 'history.csv'}: {err}") from None
+    status = summary.get("status")
+    flag = "DIVERGED: last finite state" if status == "diverged" else (
+        "interrupted" if status == "interrupted" else "")
+    head = f"{summary.get('scene', '')} [{summary.get('backend', '')}, n = {n_grid}]"
+    return " — ".join(s for s in (head, when, flag) if s)
+
+
+def draw_run(out: str | Path, phi: np.ndarray, params: Params, history, descriptors: dict, *,
+             label: str, surface: Surface | None = None,
+             view: tuple[float, float] = DEFAULT_VIEW, size: tuple[int, int] = (1200, 600),
+             engine: str = "auto", quiet: bool = True) -> dict:
+    """Write ``OUT/shape.png`` and ``OUT/history.png`` from what a run has in memory: φ on the
+    uniform grid, the parameters, the history columns and the descriptors (and the surface,
+    if extracted already). Returns the descriptors."""
+    out = Path(out)
+    subtitle = summary_line(descriptors, given="diffuse, from the diagnostics")
+    v0, m0 = params.reduced_targets()
+    ade = params.on("ade")
+    subtitle += (f"\ntargets α, β{', ΔA₀' if ade else ''}: v = {v0:.3f}"
+                 + (f", Δa = {m0:.3f}" if ade else ""))
+    render_shape(phi, params.L, out / "shape.png", title=label, view=view, size=size,
+                 engine=engine, descriptors=descriptors, subtitle=subtitle, surface=surface)
+    render_history(history, out / "history.png", params, title=label)
     if not quiet:
-        print(f"{scene}: " + subtitle.replace("\n", "; "))
+        print(f"{label}: " + subtitle.replace("\n", "; "))
         print(f"wrote {out / 'shape.png'} and {out / 'history.png'}")
-    return desc
+    return descriptors
 
 
 if __name__ == "__main__":

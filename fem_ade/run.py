@@ -1,5 +1,5 @@
 """The command line: ``python -m fem_ade.run SCENE_OR_TOML [options]``, thin over
-:func:`fem_ade.driver.simulate`.
+:func:`fem_ade.runs.simulate`; its choices come from :mod:`fem_ade.registry`.
 
 Exit codes: 0 finished (completed, steady, or max-steps reached), 2 bad input (one line on
 stderr, nothing written), 3 diverged (diagnosis printed, last finite state saved),
@@ -14,9 +14,11 @@ import sys
 import time
 from pathlib import Path
 
-from .driver import EXIT_BAD_INPUT, resume, simulate
+from .loop import EXIT_BAD_INPUT
 from .model import ModelError
 from .output import read_json
+from .registry import BACKENDS, CONSTRAINTS, SCHEMES
+from .runs import resume, simulate
 from .scenes import PAPER_SCENES, SCENES, TEACHING_SCENES, resolve_scene
 
 
@@ -29,14 +31,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="python -m fem_ade.run",
         description="Run a vesicle scene of the ADE phase-field model (see --list).",
+        allow_abbrev=False,
     )
     p.add_argument("scene", nargs="?", help="a scene name (see --list) or a .toml scene file")
     p.add_argument("--resume", metavar="DIR",
                    help="continue the run in DIR from its checkpoint (up to --steps)")
     p.add_argument("--list", action="store_true", help="list the scenes with their paper figure")
-    p.add_argument("--backend", choices=("fem", "spectral"), default="fem",
-                   help="fem: mixed periodic finite elements (default); spectral: the "
-                        "Fourier reference")
+    p.add_argument("--backend", choices=tuple(BACKENDS), default="fem",
+                   help="; ".join(f"{b.name}: {b.description}" for b in BACKENDS.values())
+                   + " (default fem)")
     p.add_argument("--n", type=int, help="cells (grid points) per direction (default: the scene's)")
     p.add_argument("--dt", type=float, help="time step (default: the paper's, per scene)")
     stop = p.add_mutually_exclusive_group()
@@ -51,12 +54,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--perturb", type=float, default=0.0,
                    help="amplitude of a smooth seeded level-set perturbation (default 0)")
     p.add_argument("--seed", type=int, default=0, help="seed of --perturb (default 0)")
-    p.add_argument("--scheme", choices=("paper", "stabilized"), default="paper",
-                   help="paper: the semi-implicit scheme of the paper (default); stabilized: "
-                        "linear, one solve per step, energy-stable at >= 100x the paper's dt")
-    p.add_argument("--constraints", choices=("penalty", "exact"), default="penalty",
-                   help="penalty: the paper's M1, M2 terms (default); exact: V = alpha and "
-                        "A = beta held at every step by Lagrange multipliers")
+    p.add_argument("--scheme", choices=tuple(SCHEMES), default="paper",
+                   help="; ".join(f"{k}: {v}" for k, v in SCHEMES.items()) + " (default paper)")
+    p.add_argument("--constraints", choices=tuple(CONSTRAINTS), default="penalty",
+                   help="; ".join(f"{k}: {v}" for k, v in CONSTRAINTS.items())
+                   + " (default penalty)")
     p.add_argument("--adaptive", action="store_true",
                    help="adapt dt: grow while E_M decays, halve on a rejected step")
     p.add_argument("--checkpoint-every", type=int, metavar="K",
@@ -71,15 +73,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--allow-underresolved", action="store_true",
                    help="allow h = L/n > eps (the interface is not resolved)")
-    fem = p.add_argument_group("finite elements (--backend fem)")
-    fem.add_argument("--order", type=int, choices=(1, 2), default=1, help="Q1 or Q2 (default 1)")
-    fem.add_argument("--mesh", help="a periodic hexahedral mesh file (read with meshio), or "
-                                    "graded[:g] for a graded tensor mesh (default: uniform)")
-    fem.add_argument("--solver", choices=("amg", "chebyshev", "jacobi", "fft", "auto"),
-                     default="amg",
-                     help="preconditioner of the PCG step solve: amg (default; flat iteration "
-                          "counts in h and dt), chebyshev or jacobi (cheap smoothers for the "
-                          "mass-dominated paper dt), fft (uniform Q1 only: exact), auto")
+    for spec in BACKENDS.values():  # each backend's own options, default None = not given
+        if not spec.options:
+            continue
+        group = p.add_argument_group(f"{spec.name} backend (--backend {spec.name})")
+        for o in spec.options:
+            group.add_argument(f"--{o.name}", type=o.type, choices=o.choices, default=None,
+                               help=o.help)
     return p
 
 
@@ -122,11 +122,7 @@ def main(argv: list[str] | None = None) -> int:
         scene = resolve_scene(args.scene)
         out = args.out or (Path("runs") / f"{scene.name}-{args.backend}-"
                            f"{time.strftime('%Y%m%d-%H%M%S')}")
-        options = {}
-        if args.backend == "fem":
-            options = {"order": args.order, "mesh": args.mesh, "solver": args.solver}
-        elif args.mesh or args.order != 1 or args.solver != "amg":
-            raise ModelError("--mesh, --order and --solver apply to --backend fem only")
+        options = backend_options(args)
         result = simulate(
             scene, backend=args.backend, n=args.n, dt=args.dt, steps=args.steps,
             until_steady=args.until_steady, max_steps=args.max_steps, every=args.every,
@@ -141,6 +137,21 @@ def main(argv: list[str] | None = None) -> int:
         print(f"fem_ade.run: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
     return _report(scene.name, args.backend, result, scene.params.as_dict(), out)
+
+
+def backend_options(args) -> dict:
+    """The chosen backend's options that were given; an option of another backend is an
+    error (it would be ignored)."""
+    options = {}
+    for spec in BACKENDS.values():
+        for o in spec.options:
+            value = getattr(args, o.name)
+            if value is None:
+                continue
+            if spec.name != args.backend:
+                raise ModelError(f"--{o.name} applies to --backend {spec.name} only")
+            options[o.name] = value
+    return options
 
 
 def _interrupt(signum, frame):

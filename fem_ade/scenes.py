@@ -2,8 +2,9 @@
 
 A scene is data plus a tiny constructor: parameters (:class:`fem_ade.model.Params`, whose
 ``effects`` say which energy terms run), the paper's time step, a default resolution, an
-initial condition, and the paper figure it reproduces. Initial conditions are functions of
-position, so that every backend evaluates them on its own points (grid or mesh nodes).
+initial condition (:mod:`fem_ade.initial`), and the paper figure it reproduces. Initial
+conditions are functions of position, so that every backend evaluates them on its own points
+(grid or mesh nodes).
 
 Initial conditions of the paper (SPEC §7): u₀ = tanh((c − q(x)) / (√2 ε)),
 q = (x−x₀)²/a + (y−y₀)²/b + (z−z₀)²/d. The consistent reading of c (the default) makes the
@@ -19,51 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .initial import IC_VARIANTS, Ellipsoid, Shape, Sphere, ic_from_mapping
 from .model import EFFECTS, PARAM_FIELDS, ModelError, Params
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
-
-IC_VARIANTS = ("consistent", "printed")
-
-
-@dataclass(frozen=True)
-class InitialCondition:
-    """A diffuse closed surface: an ellipsoid level set (the paper's) or a sphere profile.
-
-    ``kind="ellipsoid"``: φ₀ = tanh((c − q(x)) / (√2ε)) with q = Σ (xᵢ − centreᵢ)² / axesᵢ,
-    where c is ``c_consistent`` or ``c_printed``.
-    ``kind="sphere"``: φ₀ = tanh((R − |x − centre|) / (√2ε)), the 1D equilibrium profile.
-    Displacements use the periodic minimum image, so a centre anywhere in the box works.
-    """
-
-    kind: str
-    centre: tuple[float, ...]
-    axes: tuple[float, ...] = ()
-    c_consistent: float = 0.0
-    c_printed: float = 0.0
-    radius: float = 0.0
-
-    def level(self, points: np.ndarray, L: float, variant: str = "consistent") -> tuple:
-        """Return (s, scale): φ₀ = tanh(s/(√2ε)); s > 0 inside; scale is s's typical size."""
-        centre = np.asarray(self.centre, dtype=float).reshape((-1,) + (1,) * (points.ndim - 1))
-        d = points - centre
-        d -= L * np.round(d / L)  # periodic minimum image
-        if self.kind == "sphere":
-            return self.radius - np.sqrt(np.sum(d * d, axis=0)), self.radius
-        axes = np.asarray(self.axes, dtype=float).reshape(centre.shape)
-        q = np.sum(d * d / axes, axis=0)
-        c = self.c_printed if variant == "printed" else self.c_consistent
-        return c - q, c
-
-    def volume_estimate(self, variant: str = "consistent") -> float:
-        """Sharp volume of the φ₀ = 0 surface (3D), for the SPEC §7 erratum check."""
-        if self.kind == "sphere":
-            return 4.0 / 3.0 * math.pi * self.radius**3
-        c = self.c_printed if variant == "printed" else self.c_consistent
-        return 4.0 / 3.0 * math.pi * math.prod(math.sqrt(c * a) for a in self.axes)
 
 
 @dataclass(frozen=True)
@@ -73,7 +36,7 @@ class Scene:
     name: str
     params: Params
     dt: float
-    ic: InitialCondition
+    ic: Shape
     n: int = 64
     dim: int = 3
     figure: str = ""
@@ -102,6 +65,11 @@ class Scene:
             raise ValueError(
                 f"scene {self.name} is {self.dim}D; got points of shape {points.shape}"
             )
+        if self.ic.is_field:
+            if perturb:
+                raise ModelError("--perturb applies to level-set initial conditions, not to a "
+                                 "field read from a file")
+            return self.ic.field_values(points, self.params.L)
         s, scale = self.ic.level(points, self.params.L, ic)
         if perturb:
             s = s + perturb * scale * smooth_perturbation(points, self.params.L, seed)
@@ -142,9 +110,7 @@ def _paper(name, figure, eps, dt, alpha, beta, dA0, axes, c_printed, c_consisten
     n = kw.pop("n", 64)
     centre = kw.pop("centre", _C)
     params = Params(eps=eps, alpha=alpha, beta=beta, delta_A0=dA0, effects=PAPER_EFFECTS, **kw)
-    ic = InitialCondition(
-        "ellipsoid", centre, axes, c_consistent=c_consistent, c_printed=c_printed
-    )
+    ic = Ellipsoid(centre, axes, c_consistent=c_consistent, c_printed=c_printed)
     return Scene(name, params, dt, ic, n=n, figure=figure, description=desc)
 
 
@@ -196,7 +162,7 @@ def _sphere(name, effects, desc):
     R, eps = 0.25, 0.04
     sv = sphere_values(R, eps, 2.0 * eps / 3.0)
     params = Params(eps=eps, alpha=sv["V"], beta=sv["A"], delta_A0=sv["dA"], effects=effects)
-    ic = InitialCondition("sphere", _C, radius=R)
+    ic = Sphere(_C, radius=R)
     return Scene(name, params, 5e-7, ic, n=48, figure="SPEC §8", description=desc)
 
 
@@ -210,8 +176,7 @@ _TEACHING = [
 _TEACHING.append(Scene(
     "ellipse-2d",
     Params(eps=0.05, alpha=0.2316, beta=0.95 * 1.7311, delta_A0=0.1, effects=PAPER_EFFECTS),
-    2e-6, InitialCondition("ellipsoid", (0.5, 0.5), (0.6, 0.4), c_consistent=0.15,
-                           c_printed=0.15),
+    2e-6, Ellipsoid((0.5, 0.5), (0.6, 0.4), c_consistent=0.15, c_printed=0.15),
     n=64, dim=2, figure="teaching (2D)",
     description="teaching: a 2D ellipse with 95 % of its perimeter as target (fast tests)"))
 
@@ -235,18 +200,11 @@ def get_scene(name: str) -> Scene:
 # ---------------------------------------------------------------------------------------
 _SCENE_KEYS = {"name": str, "figure": str, "description": str, "n": int, "dim": int,
                "dt": float, "steps": int}
-_IC_KEYS = {"kind": str, "centre": list, "axes": list, "c_consistent": float,
-            "c_printed": float, "c": float, "radius": float}
 
 
 def _typed(table: str, key: str, value, kind):
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
-    if kind is list:
-        if not (isinstance(value, list) and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
-            raise ModelError(f"{table}.{key} must be a list of numbers, got {value!r}")
-        return tuple(float(v) for v in value)
     if not isinstance(value, kind) or isinstance(value, bool):
         raise ModelError(f"{table}.{key} must be of type {kind.__name__}, got {value!r}")
     return value
@@ -311,30 +269,18 @@ def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = 
         else:
             param_kw[key] = _typed("params", key, value, float)
 
-    ic = None
-    if ic_t is not None:
-        ic_kw = {}
-        for key, value in ic_t.items():
-            if key not in _IC_KEYS:
-                raise ModelError(f"unknown field ic.{key!r}; valid: {', '.join(_IC_KEYS)}")
-            ic_kw[key] = _typed("ic", key, value, _IC_KEYS[key])
-        if "c" in ic_kw:
-            c = ic_kw.pop("c")
-            ic_kw.setdefault("c_consistent", c)
-            ic_kw.setdefault("c_printed", c)
-        if ic_kw.get("kind") not in ("ellipsoid", "sphere"):
-            raise ModelError("ic.kind must be 'ellipsoid' or 'sphere'")
-        if "centre" not in ic_kw:
-            raise ModelError("ic.centre is required")
-        ic = InitialCondition(**ic_kw)
+    if "dim" in scene_kw and scene_kw["dim"] not in (2, 3):
+        raise ModelError(f"dim must be 2 or 3, got {scene_kw['dim']}")
+    base_scene = get_scene(base) if base is not None else None
+    dim = scene_kw.get("dim", base_scene.dim if base_scene else 3)
+    ic = ic_from_mapping(ic_t, dim) if ic_t is not None else None
 
-    if base is not None:
-        scene = get_scene(base)
-        params = scene.params.with_(**param_kw) if param_kw else scene.params
-        if "eps" in param_kw and "D" not in param_kw and scene.params.D == 2 * scene.params.eps / 3:
-            params = params.with_(D=2 * params.eps / 3)
-        if "beta" in param_kw and "A0" not in param_kw and scene.params.A0 == scene.params.beta:
-            params = params.with_(A0=params.beta)
+    if base_scene is not None:
+        scene = base_scene
+        try:
+            params = scene.params.with_(**param_kw) if param_kw else scene.params
+        except TypeError as err:
+            raise ModelError(f"bad [params] in {path}: {err}") from None
         scene = replace(scene, params=params, ic=ic or scene.ic, **scene_kw)
         if "name" not in scene_kw:
             scene = replace(scene, name=default_name)
@@ -350,10 +296,7 @@ def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = 
         scene_kw.setdefault("name", default_name)
         scene = Scene(params=params, ic=ic, **scene_kw)
 
-    if scene.ic.kind == "ellipsoid" and len(scene.ic.axes) != scene.dim:
-        raise ModelError(f"ic.axes needs {scene.dim} values for a {scene.dim}D scene")
-    if len(scene.ic.centre) != scene.dim:
-        raise ModelError(f"ic.centre needs {scene.dim} values for a {scene.dim}D scene")
+    scene.ic.check(scene.dim)
     scene.params.validate()
     return scene
 
@@ -361,8 +304,7 @@ def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = 
 def scene_to_mapping(scene: Scene) -> dict:
     """The inverse of :func:`scene_from_mapping` (used to store a run's scene for --resume)."""
     params = scene.params.as_dict()
-    ic = {k: (list(v) if isinstance(v, tuple) else v)
-          for k, v in scene.ic.__dict__.items()}
+    ic = scene.ic.to_mapping()
     return {"name": scene.name, "figure": scene.figure, "description": scene.description,
             "n": scene.n, "dim": scene.dim, "dt": scene.dt, "steps": scene.steps,
             "params": params, "ic": ic}

@@ -58,6 +58,8 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from .model import reduced_area_difference, reduced_volume
+
 #: vertex coordinates are identified on a lattice of h / 2**20 (periodic images coincide to
 #: round-off; distinct marching-cubes vertices are much further apart unless φ ≈ 0 at a node)
 _QUANT = 2**20
@@ -403,10 +405,6 @@ def count_arms(S: Surface, c: int, *, threshold: float = 0.1,
 
 
 # --- the descriptors -------------------------------------------------------------------
-def _reduced_volume(V: float, A: float) -> float:
-    return V / (4.0 * math.pi / 3.0 * (A / (4.0 * math.pi)) ** 1.5) if A > 0 else math.nan
-
-
 def describe(phi: np.ndarray, L: float, *, V: float | None = None, A: float | None = None,
              dA: float | None = None, D: float | None = None, arm_threshold: float = 0.1,
              surface: Surface | None = None) -> dict:
@@ -474,7 +472,7 @@ def describe(phi: np.ndarray, L: float, *, V: float | None = None, A: float | No
     Vu = float(V) if V is not None else V_sharp
     Au = float(A) if A is not None else A_sharp
     if dA is not None and D is not None and Au > 0:
-        m = float(dA) / (8.0 * math.pi * float(D) * math.sqrt(Au / (4.0 * math.pi)))
+        m = reduced_area_difference(float(dA), Au, float(D))
     else:
         m = sharp_m
     return {
@@ -483,14 +481,14 @@ def describe(phi: np.ndarray, L: float, *, V: float | None = None, A: float | No
         "nested": any(k is not None for k in inside_of),
         "inside_of": inside_of,
         "wraps": list(S.wraps),
-        "reduced_volume": _reduced_volume(Vu, Au),
+        "reduced_volume": reduced_volume(Vu, Au),
         "reduced_area_difference": m,
         "arms": (arms[0] if arms[0] is not None else 0) if nc else 0,
         "arms_per_component": arms,
         "area_per_component": areas,
         "sources": sources,
         "sharp": {"V": V_sharp, "A": A_sharp, "mean_curvature_integral": H_total,
-                  "reduced_volume": _reduced_volume(V_sharp, A_sharp),
+                  "reduced_volume": reduced_volume(V_sharp, A_sharp),
                   "reduced_area_difference": sharp_m},
         "shift": list(S.shift),
     }

@@ -53,6 +53,23 @@ def periodic_grid(n: int | tuple[int, int, int], L: float | tuple[float, float, 
     return points, cells
 
 
+def grid_mesh(n: int, L: float, dim: int = 3, origin=(0.0, 0.0, 0.0)):
+    """(points (P, 3), [(cell type, cells)]) of the closed periodic n^dim grid: hexahedra in
+    3D (:func:`periodic_grid`), quadrilaterals in the plane z = 0 in 2D."""
+    if dim == 2:
+        points, hexes = periodic_grid((n, n, 1), (L, L, 0.0), origin)
+        return points[::2], [("quad", hexes[:, :4] // 2)]  # the layer z = 0 of each (i, j)
+    points, cells = periodic_grid(n, L, origin)
+    return points, [("hexahedron", cells)]
+
+
+def closed_grid_values(a: np.ndarray) -> np.ndarray:
+    """A periodic grid field (n,)*dim at the points of :func:`grid_mesh` (the last layer of
+    each direction a copy of the first), flattened in C order."""
+    a = np.asarray(a, dtype=float)
+    return np.pad(a, [(0, 1)] * a.ndim, mode="wrap").ravel()
+
+
 class XdmfSeries:
     """An XDMF time series of point fields on a fixed mesh (meshio ``TimeSeriesWriter``).
 
@@ -97,17 +114,9 @@ class XdmfSeries:
     def from_grid(cls, path: str | Path, n: int, L: float, *, data_format: str = "auto",
                   origin=(0.0, 0.0, 0.0), dim: int = 3) -> XdmfSeries:
         """A series on the periodic n^dim grid of period L, periodic images closed
-        (:func:`periodic_grid`); :meth:`write` then takes (n,)*dim fields. In 2D the grid is
-        the plane z = 0 of quadrilaterals."""
-        if dim == 2:
-            points, hexes = periodic_grid((n, n, 1), (L, L, 0.0), origin)
-            points = points[::2]  # the layer z = 0 (k = 0 of each (i, j))
-            quads = hexes[:, :4] // 2
-            return cls(path, points, [("quad", quads)], data_format=data_format,
-                       grid_shape=(n, n))
-        points, cells = periodic_grid(n, L, origin)
-        return cls(path, points, [("hexahedron", cells)], data_format=data_format,
-                   grid_shape=(n, n, n))
+        (:func:`grid_mesh`); :meth:`write` then takes (n,)*dim fields."""
+        points, cells = grid_mesh(n, L, dim, origin)
+        return cls(path, points, cells, data_format=data_format, grid_shape=(n,) * dim)
 
     def _point_values(self, name: str, values) -> np.ndarray:
         a = np.asarray(values, dtype=float)

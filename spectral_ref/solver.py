@@ -1,7 +1,9 @@
 """A compact Fourier-spectral reference for the ADE phase-field model (SPEC §2–§4, §6).
 
 Written straight from the formulas, independently of the finite-element physics, so that
-the two backends cross-check each other. It imports only the scene catalogue.
+the two backends cross-check each other. It shares with the FEM only the scene catalogue and
+its parameters (the scalar parts of E_M in :class:`fem_ade.model.Params`), and generic code
+that holds no physics (the backend base, the multiplier Newton solve, output meshes).
 
 Conventions (SPEC §6): grid x_j = jL/n in each direction; derivatives by FFT (``rfftn``);
 integrals by the rectangle rule h^d Σ; no dealiasing.
@@ -23,9 +25,10 @@ import math
 import numpy as np
 from scipy import fft
 
-from fem_ade.constraints import check as check_constraints
+from fem_ade.backend import BackendBase
 from fem_ade.constraints import project, solve_multipliers
-from fem_ade.model import ratchet_stabilization, stabilization_coefficients
+from fem_ade.model import ModelError, ratchet_stabilization, stabilization_coefficients
+from fem_ade.xdmf import closed_grid_values, grid_mesh
 
 SQRT2 = math.sqrt(2.0)
 
@@ -46,44 +49,6 @@ def bending_energy(phi, lap, p, dV):
     return p.kappa / (2.0 * p.eps) * dV * np.sum(fc * fc)
 
 
-def volume(phi, dV):
-    """V = ∫ (φ + 1)/2."""
-    return dV * np.sum(phi + 1.0) / 2.0
-
-
-def area(phi, lap, p, dV):
-    """A = (3√2/4) ∫ (ε/2)|∇φ|² + (1/4ε)(φ² − 1)².
-
-    ∫|∇φ|² = −∫φΔφ, exact for the FFT Laplacian (Parseval) and free: Δφ is on the grid anyway.
-    """
-    grad2 = -np.sum(phi * lap)
-    well = np.sum((phi * phi - 1.0) ** 2)
-    return 0.75 * SQRT2 * dV * (0.5 * p.eps * grad2 + well / (4.0 * p.eps))
-
-
-def area_difference(phi, lap, p, dV):
-    """ΔA = −(3D/4) ∫ (1 − φ²)Δφ + (1/ε²) φ(1 − φ²)²   (SPEC §2, paper 2.6)."""
-    one_m = 1.0 - phi * phi
-    return -0.75 * p.D * dV * np.sum(one_m * lap + phi * one_m * one_m / p.eps**2)
-
-
-def ade_energy(dA, p):
-    """G = (κ̄π / (2A₀D²)) (ΔA − ΔA₀)²   (paper 2.7)."""
-    return p.kappa_bar * math.pi / (2.0 * p.A0 * p.D**2) * (dA - p.delta_A0) ** 2
-
-
-def ade_force(phi, lap, dA, p):
-    """h = δG/δφ = −(3κ̄π/(4A₀D))(ΔA − ΔA₀)(−2φΔφ − Δ(φ²) + (1/ε²)(1 − 6φ² + 5φ⁴)).
-
-    Returned as (P, Q) with h = P + ΔQ.
-    """
-    coef = -0.75 * p.kappa_bar * math.pi / (p.A0 * p.D) * (dA - p.delta_A0)
-    phi2 = phi * phi
-    P = coef * (-2.0 * phi * lap + (1.0 - 6.0 * phi2 + 5.0 * phi2 * phi2) / p.eps**2)
-    Q = -coef * phi2
-    return P, Q
-
-
 def bending_force_explicit(phi, lap, p):
     """κN(φ) of SPEC §4 as (P, Q), κN = P + ΔQ:
 
@@ -97,17 +62,42 @@ def bending_force_explicit(phi, lap, p):
     return kappa * P, kappa * Q
 
 
+def volume(phi, dV):
+    """V = ∫ (φ + 1)/2; its gradient δV/δφ = ½ is a constant (the k = 0 mode)."""
+    return dV * np.sum(phi + 1.0) / 2.0
+
+
+def area(phi, lap, p, dV):
+    """A = (3√2/4) ∫ (ε/2)|∇φ|² + (1/4ε)(φ² − 1)².
+
+    ∫|∇φ|² = −∫φΔφ, exact for the FFT Laplacian (Parseval) and free: Δφ is on the grid anyway.
+    """
+    grad2 = -np.sum(phi * lap)
+    well = np.sum((phi * phi - 1.0) ** 2)
+    return 0.75 * SQRT2 * dV * (0.5 * p.eps * grad2 + well / (4.0 * p.eps))
+
+
 def area_gradient(phi, lap, p):
     """δA/δφ = −(3√2/4) f, f = εΔφ − (1/ε)(φ² − 1)φ (pointwise)."""
     return -0.75 * SQRT2 * (p.eps * lap - (phi * phi - 1.0) * phi / p.eps)
 
 
-def area_force(phi, lap, A, p):
-    """δT₂/δφ = 2M₂ (A − β) δA/δφ = −(3√2/2) M₂ (A − β) f."""
-    return 2.0 * p.M2 * (A - p.beta) * area_gradient(phi, lap, p)
+def area_difference(phi, lap, p, dV):
+    """ΔA = −(3D/4) ∫ (1 − φ²)Δφ + (1/ε²) φ(1 − φ²)²   (SPEC §2, paper 2.6)."""
+    one_m = 1.0 - phi * phi
+    return -0.75 * p.D * dV * np.sum(one_m * lap + phi * one_m * one_m / p.eps**2)
 
 
-SCHEMES = ("paper", "stabilized")
+def area_difference_gradient(phi, lap, eps, coef):
+    """coef·(−2φΔφ − Δ(φ²) + (1/ε²)(1 − 6φ² + 5φ⁴)) as (P, Q), the sum being P + ΔQ.
+
+    coef = −3D/4 gives δΔA/δφ; coef = γ (``Params.ade_force_coefficient``) the ADE force
+    h = δG/δφ of SPEC §3.
+    """
+    phi2 = phi * phi
+    P = coef * (-2.0 * phi * lap + (1.0 - 6.0 * phi2 + 5.0 * phi2 * phi2) / eps**2)
+    Q = -coef * phi2
+    return P, Q
 
 
 def stabilization_symbol(k2, p, s0, s2, dim):
@@ -122,38 +112,40 @@ def stabilization_symbol(k2, p, s0, s2, dim):
     return S
 
 
-class SpectralBackend:
-    """The spectral reference as a backend of :mod:`fem_ade.driver` (see fem_ade.backend)."""
+class SpectralBackend(BackendBase):
+    """The spectral reference as a backend of :mod:`fem_ade.loop` (see fem_ade.backend)."""
 
     name = "spectral"
-    extra_columns: tuple[str, ...] = ()
 
-    def __init__(self, scene, *, n: int, dt: float, ic: str = "consistent",
+    def __init__(self, scene, *, n: int, dt: float | None = None, ic: str = "consistent",
                  perturb: float = 0.0, seed: int = 0, scheme: str = "paper",
-                 constraints: str = "penalty", workers: int | None = None):
-        if scheme not in SCHEMES:
-            raise ValueError(f"unknown scheme {scheme!r}; valid: {', '.join(SCHEMES)}")
-        self.scene, self.p, self.n, self.scheme = scene, scene.params, n, scheme
-        self.dim = scene.dim
-        L = self.p.L
-        self.dV = (L / n) ** self.dim
+                 constraints: str = "penalty", workers: int | None = None,
+                 start_state: dict | None = None):
+        super().__init__(scene, n=n, scheme=scheme, constraints=constraints)
+        self.dim = dim = self.scene.dim
+        L = self.params.L
+        self.dV = (L / n) ** dim
         self.workers = workers if workers is not None else -1
-        self.axes = tuple(range(self.dim))
+        self.axes = tuple(range(dim))
         x = np.arange(n) * (L / n)
-        self.points = np.stack(np.meshgrid(*[x] * self.dim, indexing="ij"))
-        phi0 = scene.initial_phi(self.points, ic=ic, perturb=perturb, seed=seed)
-        self.k2 = wavenumbers_squared(n, L, self.dim)
-        self.set_dt(dt)
+        self.points = np.stack(np.meshgrid(*[x] * dim, indexing="ij"))
+        self.k2 = wavenumbers_squared(n, L, dim)
         self.stab = None  # (s₀, s₂) in use by the stabilized scheme
-        self.exact = check_constraints(constraints) == "exact"
-        if self.exact:
-            self.extra_columns = ("lambda_V", "lambda_A")
-            phi0 = self._project(phi0)[0]
-        self._set_hat(self._fwd(phi0))
+        if start_state is not None:
+            self.set_state(start_state)
+        else:
+            phi0 = self.initial_field(self.points, ic=ic, perturb=perturb, seed=seed)
+            if self.exact:
+                phi0 = self._project(phi0)[0]
+            self._set_hat(self._fwd(phi0))
+        if dt is not None:
+            self.set_dt(dt)
 
     def set_dt(self, dt: float) -> None:
         """Set Δt; the implicit symbol of SPEC §4 is 1/Δt + κ(ε|k|⁴ − (2/ε)|k|²)."""
-        p = self.p
+        if dt == self.dt:
+            return
+        p = self.params
         self.dt = dt
         self.symbol = 1.0 / dt + p.kappa * (p.eps * self.k2**2 - (2.0 / p.eps) * self.k2)
 
@@ -187,19 +179,19 @@ class SpectralBackend:
 
     # -- the scheme -------------------------------------------------------------------
     def step(self) -> dict:
-        p, phi, lap, dV = self.p, self.phi, self.lap, self.dV
+        p, phi, lap, dV = self.params, self.phi, self.lap, self.dV
         P, Q = bending_force_explicit(phi, lap, p)
         dA = None
         if p.on("ade"):
             dA = area_difference(phi, lap, p, dV)
-            Ph, Qh = ade_force(phi, lap, dA, p)
+            Ph, Qh = area_difference_gradient(phi, lap, p.eps, p.ade_force_coefficient(dA))
             P, Q = P + Ph, Q + Qh
         A = area(phi, lap, p, dV) if p.on("area") else None
         if A is not None:
-            P = P + area_force(phi, lap, A, p)
+            P = P + p.area_slope(A) * area_gradient(phi, lap, p)
         R_hat = self._fwd(P) - self.k2 * self._fwd(Q)
-        if p.on("volume"):  # a constant: only the k = 0 mode
-            R_hat[(0,) * self.dim] += p.M1 * (volume(phi, dV) - p.alpha) * self.n**self.dim
+        if p.on("volume"):  # slope × δV/δφ = slope × ½, a constant: only the k = 0 mode
+            R_hat[(0,) * self.dim] += 0.5 * p.volume_slope(volume(phi, dV)) * self.n**self.dim
         if self.scheme == "paper" and not self.exact:
             self._set_hat((self.phi_hat / self.dt - R_hat) / self.symbol)
             return {}
@@ -213,7 +205,7 @@ class SpectralBackend:
 
     def _constrained_update(self, base_hat, solve):
         """φⁿ⁺¹ = base − λ_V P⁻¹g_V − λ_A P⁻¹g_A with V = α, A = β (fem_ade.constraints)."""
-        p, dV, phi, lap = self.p, self.dV, self.phi, self.lap
+        p, dV, phi, lap = self.params, self.dV, self.phi, self.lap
         gV_hat = np.zeros_like(base_hat)
         gV_hat[(0,) * self.dim] = 0.5 * self.n**self.dim  # the transform of the constant ½
         gA_hat = self._fwd(area_gradient(phi, lap, p))
@@ -238,7 +230,7 @@ class SpectralBackend:
 
     def _project(self, phi):
         """Project the initial φ onto V = α, A = β (fem_ade.constraints.project)."""
-        p, dV = self.p, self.dV
+        p, dV = self.params, self.dV
 
         def measure(u):
             lap = self._inv(-self.k2 * self._fwd(u))
@@ -263,21 +255,19 @@ class SpectralBackend:
         The paper's scheme: P = 1/Δt + 𝓛 (diagonal). The large-step scheme (SPEC §10 recipe,
         made concrete): P = 1/Δt + 𝓛 + S + Σᵢ σᵢ gᵢ⟨gᵢ, ·⟩, S the diagonal of
         :func:`stabilization_symbol`, the rank-one terms the Hessians of the penalties: area
-        2M₂ with g = δA/δφ, ADE κ̄π/(A₀D²) with g = δΔA/δφ, applied by Woodbury.
+        σ = 2M₂ with g = δA/δφ, ADE σ = κ̄π/(A₀D²) with g = δΔA/δφ, applied by Woodbury.
         """
         if self.scheme == "paper":
             return lambda rhs: rhs / self.symbol
-        p, phi, lap = self.p, self.phi, self.lap
+        p, phi, lap = self.params, self.phi, self.lap
         self.stab = ratchet_stabilization(self.stab, stabilization_coefficients(p, A, dA))
         d = self.symbol + stabilization_symbol(self.k2, p, *self.stab, self.dim)
         low_rank = []
-        if A is not None and p.M2 > 0:  # g = δA/δφ
+        if A is not None and p.M2 > 0:
             low_rank.append((2.0 * p.M2, self._fwd(area_gradient(phi, lap, p))))
-        if dA is not None and p.kappa_bar > 0:  # g = −(3D/4)(−2φΔφ − Δ(φ²) + (1 − 6φ² + 5φ⁴)/ε²)
-            phi2 = phi * phi
-            Pg = -2.0 * phi * lap + (1.0 - 6.0 * phi2 + 5.0 * phi2 * phi2) / p.eps**2
-            g_hat = -0.75 * p.D * (self._fwd(Pg) + self.k2 * self._fwd(phi2))
-            low_rank.append((p.kappa_bar * math.pi / (p.A0 * p.D**2), g_hat))
+        if dA is not None and p.kappa_bar > 0:
+            Pg, Qg = area_difference_gradient(phi, lap, p.eps, -0.75 * p.D)
+            low_rank.append((p.ade_modulus, self._fwd(Pg) - self.k2 * self._fwd(Qg)))
         if not low_rank:
             return lambda rhs: rhs / d
         z = [g / d for _, g in low_rank]
@@ -294,22 +284,10 @@ class SpectralBackend:
 
     # -- measurements -----------------------------------------------------------------
     def diagnostics(self) -> dict:
-        p, phi, lap, dV = self.p, self.phi, self.lap, self.dV
-        W = bending_energy(phi, lap, p, dV)
-        V = volume(phi, dV)
-        A = area(phi, lap, p, dV)
-        dA = G = 0.0
-        if p.on("ade"):
-            dA = area_difference(phi, lap, p, dV)
-            G = ade_energy(dA, p)
-        T1 = p.M1 * (V - p.alpha) ** 2 if p.on("volume") else 0.0
-        T2 = p.M2 * (A - p.beta) ** 2 if p.on("area") else 0.0
-        return {"E": W + G + T1 + T2, "W": W, "G": G, "V": V, "A": A, "dA": dA,
-                "T1": T1, "T2": T2}
-
-    def max_abs_phi(self) -> float:
-        m = float(np.max(np.abs(self.phi)))
-        return m if math.isfinite(m) else math.nan
+        p, phi, lap, dV = self.params, self.phi, self.lap, self.dV
+        dA = area_difference(phi, lap, p, dV) if p.on("ade") else None
+        return p.energy(bending_energy(phi, lap, p, dV), volume(phi, dV),
+                        area(phi, lap, p, dV), dA)
 
     def state(self) -> dict:
         state = {"phi_hat": self.phi_hat}  # replaced, never mutated, by step()
@@ -318,18 +296,26 @@ class SpectralBackend:
         return state
 
     def set_state(self, state: dict) -> None:
-        self._set_hat(np.array(state["phi_hat"]))
+        phi_hat = np.asarray(state.get("phi_hat", np.zeros(0)))
+        shape = self.k2.shape
+        if phi_hat.shape != shape or not np.iscomplexobj(phi_hat):
+            raise ModelError(f"the state holds a spectrum of shape {phi_hat.shape}; this "
+                             f"grid (n = {self.n}, {self.dim}D) needs {shape}")
+        self._set_hat(np.array(phi_hat))
         self.stab = tuple(float(v) for v in state["stab"]) if "stab" in state else None
 
     def fields(self) -> dict:
-        x = np.arange(self.n) * (self.p.L / self.n)
+        x = np.arange(self.n) * (self.params.L / self.n)
         return {"phi": self.phi, "x": x}
 
+    def grid_phi(self) -> np.ndarray:
+        return self.phi
+
     def output_mesh(self):
-        return None  # the driver writes the periodic grid
+        return grid_mesh(self.n, self.params.L, self.dim)
 
     def point_data(self) -> dict:
-        return {"phi": self.phi}
+        return {"phi": closed_grid_values(self.phi)}
 
     def info(self) -> dict:
         return {"n": self.n, "dim": self.dim, "grid": "uniform periodic",

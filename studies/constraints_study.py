@@ -112,8 +112,8 @@ def find_dt(
     """The largest Δt of DT_FACTORS × paper Δt with no divergence and E_M decreasing.
 
     ``stop_at_ok=False`` runs every factor (the full trial of ``--dt-trial``)."""
-    from fem_ade.driver import simulate
     from fem_ade.model import ModelError
+    from fem_ade.runs import simulate
 
     scene = scene_for(name, variant)
     log = []
@@ -285,7 +285,7 @@ def run_case(
     quiet: bool,
     subdir: str = "constraints",
 ) -> dict:
-    from fem_ade.driver import simulate
+    from fem_ade.runs import simulate
 
     n, extra = SCENES[name]
     if quick:
@@ -400,7 +400,7 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
     from scipy import fft
 
     from fem_ade.backend import make_backend
-    from fem_ade.driver import run_loop
+    from fem_ade.loop import run_loop
     from fem_ade.output import write_fields, write_json_atomic
     from fem_ade.render import render_run
     from fem_ade.scenes import scene_to_mapping

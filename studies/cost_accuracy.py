@@ -20,7 +20,7 @@ import os
 import time
 from pathlib import Path
 
-from fem_ade.driver import simulate
+from fem_ade.runs import simulate
 from fem_ade.scenes import get_scene
 
 QUANTITIES = ("E", "V", "A")

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_ade.backend import make_backend
-from fem_ade.driver import run_loop
+from fem_ade.loop import run_loop
 from fem_ade.scenes import PAPER_SCENES
 
 CASES = [  # label, backend options, Δt factor, steps

@@ -13,7 +13,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from fem_ade.driver import simulate
+from fem_ade.runs import simulate
 from fem_ade.scenes import get_scene
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from fem_ade.backend import Backend, make_backend
 from fem_ade.fem import FEMBackend, forms
-from fem_ade.model import ModelError
+from fem_ade.model import ModelError, Params
 from fem_ade.scenes import get_scene, sphere_values
 
 
@@ -90,9 +90,12 @@ def test_off_effects_are_not_evaluated(monkeypatch):
     def forbidden(*args, **kwargs):
         raise AssertionError("an effect that is off was evaluated")
 
-    for name in ("ade_nodal", "area_penalty_nodal", "ade_coefficient", "area_penalty_coefficient",
-                 "volume_penalty_coefficient"):
+    for name in ("area_difference", "area_difference_gradient", "area_gradient",
+                 "volume_gradient"):
         monkeypatch.setattr(forms, name, forbidden)
+    for name in ("ade_force_coefficient", "area_force_scale", "volume_slope", "ade_energy",
+                 "area_energy", "volume_energy"):
+        monkeypatch.setattr(Params, name, forbidden)
     b = FEMBackend(get_scene("sphere-bending"), n=12, dt=5e-7)
     b.step()
     d = b.diagnostics()
@@ -152,19 +155,20 @@ def test_exact_constraints_hold_V_and_A():
 @pytest.mark.parametrize("order,mesh", [(1, None), (2, None), (1, "graded")])
 def test_output_fields_2d(order, mesh):
     """2D quads: the same code; fields on the uniform grid and a closed output mesh."""
-    from fem_ade.model import Params
-    from fem_ade.scenes import InitialCondition, Scene
+    from fem_ade.initial import Sphere
+    from fem_ade.scenes import Scene
 
-    ic = InitialCondition("sphere", (0.5, 0.5), radius=0.25)
+    ic = Sphere((0.5, 0.5), radius=0.25)
     scene = Scene("disc-2d", Params(eps=0.05, alpha=0.2, beta=1.5, effects={"bending"}),
                   2e-6, ic, n=16, dim=2)
     b = FEMBackend(scene, n=16, dt=scene.dt, order=order, mesh=mesh)
     b.step()
-    f = b.fields()
+    grid = b.grid_phi()
     m = 16 * order
-    assert f["phi_grid"].shape == (m, m) and f["x"].shape == (m,)
+    x = np.arange(m) / m
+    assert grid.shape == (m, m)
     points, cells = b.output_mesh()
     assert points.shape[1] == 3 and cells[0][0] == "quad"
     assert b.point_data()["phi"].shape == (len(points),)
-    exact = scene.initial_phi(np.stack(np.meshgrid(f["x"], f["x"], indexing="ij")))
-    assert np.abs(f["phi_grid"] - exact).max() < 0.2  # one small step from φ₀
+    exact = scene.initial_phi(np.stack(np.meshgrid(x, x, indexing="ij")))
+    assert np.abs(grid - exact).max() < 0.2  # one small step from φ₀

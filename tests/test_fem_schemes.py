@@ -45,7 +45,7 @@ def test_stabilized_discocyte_100x():
     scene = get_scene("discocyte")
     E, phimax, its, b = run_stabilized(scene, 32, 5e-5, 500, 10)
     check_decay(E, phimax, its, "discocyte Q1 n=32, dt=5e-5, 500 steps")
-    assert its.max() <= 15 and len(b._solvers) <= 4
+    assert its.max() <= 15 and len(b.stepper._solvers) <= 4
 
 
 def test_stabilized_state_restores_bit_for_bit():
@@ -61,7 +61,7 @@ def test_stabilized_state_restores_bit_for_bit():
     want = b.state()["phi"]
     c = FEMBackend(scene, n=12, dt=100 * scene.dt, scheme="stabilized")
     c.set_state(snap)
-    assert c.stab == tuple(snap["stab"])
+    assert c.stepper.stab == tuple(snap["stab"])
     for _ in range(3):
         c.step()
     assert np.array_equal(c.state()["phi"], want)
@@ -69,13 +69,13 @@ def test_stabilized_state_restores_bit_for_bit():
 
 def test_stabilized_low_rank_terms_are_the_penalty_hessians():
     """σ b bᵀ: b are the exact gradients of the discrete V, A, ΔA (finite differences)."""
-    from fem_ade.fem import diagnostics
+    from fem_ade.fem import forms
 
     scene = get_scene("discocyte")
     b = FEMBackend(scene, n=12, dt=scene.dt, scheme="stabilized")
     p = scene.params
-    A, dA = b._values()
-    terms = b._low_rank(A, dA)
+    A, dA = b.stepper.values(b.phi, b.mu, b.Kphi)
+    terms = b.stepper.rank_one(b.phi, b.mu, b.Kphi, A, dA)
     assert [s for s, _ in terms] == pytest.approx(
         [2 * p.M1, 2 * p.M2, p.kappa_bar * np.pi / (p.A0 * p.D**2)])
     rng = np.random.default_rng(1)
@@ -84,8 +84,8 @@ def test_stabilized_low_rank_terms_are_the_penalty_hessians():
 
     def values(u):
         Ku = b.K @ u
-        return np.array([diagnostics.volume(u, b.w), diagnostics.area(u, Ku, b.w, p.eps),
-                         diagnostics.area_difference(u, Ku, b.w, p)])
+        return np.array([forms.volume(u, b.w), forms.area(u, Ku, b.w, p.eps),
+                         forms.area_difference(u, Ku, b.w, p.D, p.eps)])
 
     fd = (values(b.phi + h * v) - values(b.phi - h * v)) / (2 * h)
     got = np.array([g @ v for _, g in terms])

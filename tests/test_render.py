@@ -93,10 +93,12 @@ def test_render_history_computes_penalties(tmp_path):
         f"{k},{tk!r},{30 - k},{25 - k},{0.1 * (k + 1)},{0.1 + 0.01 * k},{1 - 0.02 * k},0.2"
         for k, tk in enumerate(t.tolist())]
     csv.write_text("\n".join(rows) + "\n")
-    path = render_history(csv, tmp_path / "history.png", alpha=0.1, beta=1.0, delta_A0=0.25,
-                          M1=1e5, M2=1e4)
+    from fem_ade.model import Params
+
+    p = Params(eps=0.04, alpha=0.1, beta=1.0, delta_A0=0.25)
+    path = render_history(csv, tmp_path / "history.png", p)
     _png_size(path)
-    path = render_history(csv, tmp_path / "h2.png", alpha=0.1, beta=1.0, delta_A0=0.0)
+    path = render_history(csv, tmp_path / "h2.png", p.with_(delta_A0=0.0, effects={"bending"}))
     _png_size(path)
 
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from fem_ade.driver import run_loop
+from fem_ade.loop import run_loop
 from fem_ade.scenes import get_scene
 from spectral_ref import SpectralBackend
 

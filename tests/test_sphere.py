@@ -2,7 +2,7 @@
 
 import pytest
 
-from fem_ade.driver import run_loop
+from fem_ade.loop import run_loop
 from fem_ade.scenes import get_scene, sphere_values
 from spectral_ref import SpectralBackend
 

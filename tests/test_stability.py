@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from fem_ade.driver import AdaptiveDt, run_loop
+from fem_ade.loop import AdaptiveDt, run_loop
 from fem_ade.output import read_history
 from fem_ade.scenes import PAPER_SCENES, get_scene
 from spectral_ref import SpectralBackend

@@ -54,13 +54,13 @@ def check_ex03_step_spectrum(r):
 
 
 def check_ex04_vesicle_2d_api(r):
-    """Energy decreases, the penalties hold V and A; FEM agrees with spectral if it runs."""
-    for name in ("spectral", "fem") if r["fem_error"] is None else ("spectral",):
+    """Energy decreases, the penalties hold V and A; FEM agrees with spectral (measured 3e-3
+    after the quick mode's 200 steps)."""
+    for name in ("spectral", "fem"):
         assert r[name]["E_decreasing"], f"{name}: E_M rose between records"
         assert abs(r[name]["V_rel"] - 1) < 0.05, f"{name}: V/α = {r[name]['V_rel']:.4f}"
         assert abs(r[name]["A_rel"] - 1) < 0.05, f"{name}: A/β = {r[name]['A_rel']:.4f}"
-    if r["fem_error"] is None:
-        assert r["E_rel_diff"] < 0.05, f"|E_fem/E_spectral − 1| = {r['E_rel_diff']:.3e}"
+    assert r["E_rel_diff"] < 0.01, f"|E_fem/E_spectral − 1| = {r['E_rel_diff']:.3e}"
 
 
 def test_examples_found():

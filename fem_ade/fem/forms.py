@@ -1,29 +1,32 @@
-"""The weak forms of the mixed scheme (SPEC §5), one short function per term.
+"""The weak forms of the mixed scheme (SPEC §2–§5): every functional and its gradient, once.
 
 Implicit side (assembled once per run): ``mass`` (φ, v) and ``laplace`` (∇φ, ∇v).
 
-Explicit side ⟨Rⁿ, v⟩ of SPEC §4–§5, Rⁿ = κN(φⁿ) + h(φⁿ) + M₁(Vⁿ − α) − (3√2/2)M₂(Aⁿ − β)f(φⁿ),
-with every Δ moved onto v or replaced by −μⁿ. Each term exists twice, side by side:
+Functionals (SPEC §2) on nodal fields. Integrals of nonlinear expressions are exact integrals
+of their nodal interpolants, ∫ I(F) = Σᵢ wᵢ F(φᵢ) with w = M·1 (the trapezoid rule for
+uniform Q1, Simpson/Gauss–Lobatto for tensor Q2); the gradient integrals are exact,
+∫|∇φ|² = φᵀKφ and ∫ (1 − φ²)Δφ = (φ²)ᵀKφ; μ = M_L⁻¹Kφ stands for −Δφ.
 
-- ``*_nodal(...) -> (a, c)``: nonlinear products interpolated at the nodes, so that the term is
-  ``K @ a + M_L @ c`` (M_L = diag(M·1), the nodal quadrature; ``M @ c`` with the backend's
-  ``mass="consistent"``): one sparse product for the whole right side. This is the default:
-  the observed rates against the spectral reference are 2 (Q1) and 4 (Q2), the same as with
-  quadrature, at a fraction of the cost.
-- ``@LinearForm`` versions, integrated at quadrature points (scikit-fem), for verification and
-  for meshes assembled with scikit-fem (``products="quadrature"``).
+Gradients ⟨δQ/δφ, v⟩ as functionals with nodal products: each ``*_gradient`` returns
+``(a, c)`` with ⟨·, v⟩ = K a + M_t c (M_t = M_L = diag(w) by default), so that a sum of terms
+is one sparse product. A gradient times the slope of its term in E_M (``Params.*_slope``,
+``Params.ade_force_coefficient``) is that term's force; the same gradient is the vector b of
+the term's rank-one Hessian σbbᵀ in the stabilized scheme and the direction of the exact
+constraints. The explicit part of the bending force, κN(φ) of SPEC §4, is
+:func:`bending_explicit`.
 
-The ADE term is :func:`ade_nodal` / :func:`ade_explicit`.
+``*_form``: the same explicit terms integrated at quadrature points (scikit-fem LinearForms),
+for verification and for ``products="quadrature"``. Observed rates against the spectral
+reference are 2 (Q1) and 4 (Q2) in E, V, A with nodal products, as with quadrature.
 """
 
 from __future__ import annotations
 
-import math
-
 from skfem import BilinearForm, LinearForm
 from skfem.helpers import dot, grad
 
-from ..model import SQRT2
+from ..model import AREA_FACTOR
+from .solve import _dot
 
 
 # ---------------------------------------------------------------------------------------------
@@ -42,9 +45,66 @@ def laplace(u, v, w):
 
 
 # ---------------------------------------------------------------------------------------------
-# explicit right side, nodal products: each returns (a, c) with ⟨term, v⟩ = K a + M_L c
+# the functionals of SPEC §2
 # ---------------------------------------------------------------------------------------------
-def bending_nodal(phi, mu, *, kappa, eps, C):
+def volume(phi, weights) -> float:
+    """V = ∫ (φ + 1)/2."""
+    return 0.5 * _dot(weights, phi + 1.0)
+
+
+def area(phi, Kphi, weights, eps) -> float:
+    """A = (3√2/4) ∫ (ε/2)|∇φ|² + (1/4ε)(φ² − 1)²."""
+    grad2 = _dot(phi, Kphi)
+    bulk = _dot(weights, (phi * phi - 1.0) ** 2)
+    return AREA_FACTOR * (0.5 * eps * grad2 + bulk / (4.0 * eps))
+
+
+def area_difference(phi, Kphi, weights, D, eps) -> float:
+    """ΔA = −(3D/4) ∫ (1 − φ²)Δφ + (1/ε²) φ(1 − φ²)²  (paper 2.6); (1 − φ², Δφ) = (∇φ², ∇φ)."""
+    phi2 = phi * phi
+    lap_term = _dot(phi2, Kphi)
+    bulk = _dot(weights, phi * (1.0 - phi2) ** 2) / eps**2
+    return -0.75 * D * (lap_term + bulk)
+
+
+def bending(phi, mu, weights, kappa, eps, C) -> float:
+    """W = (κ/2ε) ∫ f_c², f_c = −εμ − (1/ε)(φ² − 1)(φ + Cε)  (paper 2.1)."""
+    fc = -eps * mu - (phi * phi - 1.0) * (phi + C * eps) / eps
+    return kappa / (2.0 * eps) * _dot(weights, fc * fc)
+
+
+# ---------------------------------------------------------------------------------------------
+# gradients: (a, c) with ⟨δQ/δφ, v⟩ = K a + M_t c
+# ---------------------------------------------------------------------------------------------
+def volume_gradient(weights):
+    """⟨δV/δφ, v⟩ = ½(1, v): the vector ½ M_L·1 (nodal quadrature of the constant ½)."""
+    return 0.5 * weights
+
+
+def area_gradient(phi, eps, coef=AREA_FACTOR):
+    """coef·[ε(∇φ, ∇v) + (1/ε)((φ² − 1)φ, v)]: ⟨δA/δφ, v⟩ for coef = 3√2/4, and the area
+    penalty's force −(3√2/2)M₂(A − β)⟨f, v⟩ for coef = ``Params.area_force_scale(A)``
+    (f = εΔφ − (1/ε)(φ² − 1)φ, SPEC §3).
+
+    Returns (s, c): the K part is s·φ (a multiple of φ, so callers reuse Kφ).
+    """
+    return coef * eps, coef / eps * (phi * phi - 1.0) * phi
+
+
+def area_difference_gradient(phi, mu, eps, coef):
+    """coef·⟨−2φΔφ − Δ(φ²) + (1/ε²)(1 − 6φ² + 5φ⁴), v⟩
+    = coef·[(2φμ, v) + (∇φ², ∇v) + (1/ε²)(1 − 6φ² + 5φ⁴, v)].
+
+    coef = −3D/4 gives ⟨δΔA/δφ, v⟩; coef = γ (``Params.ade_force_coefficient``) the ADE
+    force ⟨h(φ), v⟩ of SPEC §3.
+    """
+    phi2 = phi * phi
+    a = coef * phi2
+    c = coef * (2.0 * phi * mu + (1.0 / eps**2) * (1.0 - 6.0 * phi2 + 5.0 * phi2 * phi2))
+    return a, c
+
+
+def bending_explicit(phi, mu, *, kappa, eps, C):
     """κ⟨N(φ), v⟩ (SPEC §4), N(φ) = −(1/ε)Δ(φ³) − CΔ(φ²) − (3/ε)φ²Δφ − 2CφΔφ + (1/ε³)P(φ).
 
     Weak form: (1/ε)(∇φ³, ∇v) + C(∇φ², ∇v) + ((3/ε)φ²μ + 2Cφμ + (1/ε³)P(φ), v),
@@ -60,45 +120,11 @@ def bending_nodal(phi, mu, *, kappa, eps, C):
     return kappa * a, kappa * c
 
 
-def ade_coefficient(dA, params) -> float:
-    """γ = −(3κ̄π / (4A₀D))(ΔA − ΔA₀): h(φ) = γ(−2φΔφ − Δ(φ²) + (1/ε²)(1 − 6φ² + 5φ⁴)), SPEC §3."""
-    return -3.0 * params.kappa_bar * math.pi / (4.0 * params.A0 * params.D) * (dA - params.delta_A0)
-
-
-def ade_nodal(phi, mu, *, gamma, eps):
-    """⟨h(φ), v⟩, the ADE term (SPEC §3, δG/δφ):
-
-    γ[(2φμ, v) + (∇φ², ∇v) + (1/ε²)(1 − 6φ² + 5φ⁴, v)].
-    """
-    phi2 = phi * phi
-    a = gamma * phi2
-    c = gamma * (2.0 * phi * mu + (1.0 / eps**2) * (1.0 - 6.0 * phi2 + 5.0 * phi2 * phi2))
-    return a, c
-
-
-def area_penalty_nodal(phi, *, coef, eps):
-    """−(3√2/2)M₂(A − β)⟨f, v⟩ with f = εΔφ − (1/ε)(φ² − 1)φ (SPEC §3), ``coef`` = (3√2/2)M₂(A − β).
-
-    Weak form: coef·[ε(∇φ, ∇v) + (1/ε)((φ² − 1)φ, v)].
-    """
-    return coef * eps * phi, coef / eps * (phi * phi - 1.0) * phi
-
-
-def area_penalty_coefficient(A, params) -> float:
-    """(3√2/2) M₂ (A − β): δT₂/δφ = −(this)·f (SPEC §3)."""
-    return 1.5 * SQRT2 * params.M2 * (A - params.beta)
-
-
-def volume_penalty_coefficient(V, params) -> float:
-    """M₁(V − α) = δT₁/δφ (SPEC §3); its weak form is this number times (1, v)."""
-    return params.M1 * (V - params.alpha)
-
-
 # ---------------------------------------------------------------------------------------------
-# explicit right side, quadrature versions (w.phi, w.mu are interpolated fields)
+# the explicit terms at quadrature points (w.phi, w.mu are interpolated fields)
 # ---------------------------------------------------------------------------------------------
 @LinearForm
-def bending_explicit(v, w):
+def bending_explicit_form(v, w):
     """κ⟨N(φ), v⟩ at quadrature points (SPEC §4–§5); ∇(φ³) = 3φ²∇φ, ∇(φ²) = 2φ∇φ."""
     phi, mu, eps, C = w.phi, w.mu, w.eps, w.C
     flux = (3.0 / eps * phi**2 + 2.0 * C * phi) * dot(grad(phi), grad(v))
@@ -108,21 +134,16 @@ def bending_explicit(v, w):
 
 
 @LinearForm
-def ade_explicit(v, w):
-    """⟨h(φ), v⟩, the ADE term at quadrature points (SPEC §3): γ[(2φμ, v) + (2φ∇φ, ∇v) + ...]."""
+def area_difference_gradient_form(v, w):
+    """:func:`area_difference_gradient` at quadrature points:
+    coef·[(2φμ, v) + (2φ∇φ, ∇v) + (1/ε²)(1 − 6φ² + 5φ⁴, v)]."""
     phi = w.phi
     src = 2.0 * phi * w.mu + (1.0 - 6.0 * phi**2 + 5.0 * phi**4) / w.eps**2
-    return w.gamma * (2.0 * phi * dot(grad(phi), grad(v)) + src * v)
+    return w.coef * (2.0 * phi * dot(grad(phi), grad(v)) + src * v)
 
 
 @LinearForm
-def area_penalty_explicit(v, w):
-    """−(3√2/2)M₂(A − β)⟨f, v⟩ at quadrature points: coef·[ε(∇φ, ∇v) + (1/ε)((φ² − 1)φ, v)]."""
+def area_gradient_form(v, w):
+    """:func:`area_gradient` at quadrature points: coef·[ε(∇φ, ∇v) + (1/ε)((φ² − 1)φ, v)]."""
     phi = w.phi
     return w.coef * (w.eps * dot(grad(phi), grad(v)) + (phi**2 - 1.0) * phi * v / w.eps)
-
-
-@LinearForm
-def unit_load(v, w):
-    """(1, v): the volume penalty's weak form is M₁(V − α) times this vector (SPEC §3)."""
-    return v

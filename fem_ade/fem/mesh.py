@@ -239,15 +239,38 @@ def from_file(path: str | Path, dim: int = 3, L: float | None = None) -> Periodi
     return PeriodicMesh("file", dim, float(ext[0]), source=str(path), _skfem=periodic)
 
 
+#: the grading of ``graded`` without ``:g``
+DEFAULT_GRADING = 0.3
+
+
+def parse_option(mesh) -> tuple[str, object]:
+    """The ``mesh`` option as (kind, value): ("uniform", None), ("graded", g), ("file", path)
+    or ("given", PeriodicMesh). Raises ModelError for a malformed grading."""
+    if isinstance(mesh, PeriodicMesh):
+        return "given", mesh
+    if mesh is None or mesh == "uniform":
+        return "uniform", None
+    if isinstance(mesh, str) and (mesh == "graded" or mesh.startswith("graded:")):
+        text = mesh.partition(":")[2]
+        try:
+            g = float(text) if text else DEFAULT_GRADING
+        except ValueError:
+            raise ModelError(f"--mesh graded:g needs a number g in [0, 1), got {text!r}") from None
+        if not 0.0 <= g < 1.0:
+            raise ModelError(f"--mesh graded:g needs 0 <= g < 1, got {g}")
+        return "graded", g
+    return "file", Path(mesh)
+
+
 def make(dim: int, n: int, L: float, mesh=None) -> PeriodicMesh:
     """The mesh a backend runs on: ``None``/"uniform", "graded[:g]", a path, or a PeriodicMesh."""
-    if isinstance(mesh, PeriodicMesh):
-        if mesh.dim != dim:
-            raise ModelError(f"mesh is {mesh.dim}D but the scene is {dim}D")
-        return mesh
-    if mesh is None or mesh == "uniform":
+    kind, value = parse_option(mesh)
+    if kind == "given":
+        if value.dim != dim:
+            raise ModelError(f"mesh is {value.dim}D but the scene is {dim}D")
+        return value
+    if kind == "uniform":
         return uniform(dim, n, L)
-    if isinstance(mesh, str) and mesh.startswith("graded"):
-        g = float(mesh.split(":", 1)[1]) if ":" in mesh else 0.3
-        return graded(dim, n, L, g)
-    return from_file(mesh, dim, L)
+    if kind == "graded":
+        return graded(dim, n, L, value)
+    return from_file(value, dim, L)

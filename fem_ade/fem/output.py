@@ -1,4 +1,4 @@
-"""The FEM fields as a closed (non-periodic) mesh for ParaView output (the driver's XDMF series).
+"""The FEM fields as a closed (non-periodic) mesh for ParaView output (a run's XDMF series).
 
 A periodic mesh has no nodes on its upper faces; for pictures they are put back: the output
 mesh has the periodic images closed, and ``index`` maps each output point to its DOF.

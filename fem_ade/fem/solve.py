@@ -46,8 +46,8 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import LinearOperator
 
 from ..model import ModelError
+from ..registry import FEM_SOLVERS as SOLVERS
 
-SOLVERS = ("amg", "chebyshev", "jacobi", "fft", "auto")
 #: ``auto`` takes ``chebyshev`` while s·max(K_ii/m_i) ≤ this (M_L + sK mass-dominated enough
 #: that D⁻¹(M_L + sK) has condition ≤ 1 + 2·this by Gershgorin), else ``amg``
 AUTO_CHEBYSHEV_LIMIT = 20.0
@@ -328,7 +328,7 @@ class StepSolver:
             scale = math.sqrt(_dot(r, r))
         if scale == 0.0:
             return np.array(ref, copy=True), 0
-        # not converged or broken down (NaN input): return what there is; the driver's
+        # not converged or broken down (NaN input): return what there is; the loop's
         # guards judge the state (max |φ|, finiteness), the history shows the its.
         return pcg(op.matvec, np.asarray(b, dtype=float), x0, self.precondition,
                    self.rtol * scale, maxiter=500)

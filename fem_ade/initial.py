@@ -1,0 +1,514 @@
+"""Initial conditions: diffuse level sets of simple shapes, and fields of earlier runs.
+
+A shape is a level function s(x), positive inside, and the initial field is
+φ₀ = tanh(s / (√2 ε)). For the distance-like kinds (everything but the paper's ellipsoid)
+s is the signed distance to the surface, or close to it, so φ₀ has the 1D equilibrium
+profile across the membrane. Displacements use the periodic minimum image, so a centre
+anywhere in the box works. One small class per kind, each with the fields a scene file
+gives under ``[ic]`` (``kind = "..."``), validated by :func:`ic_from_mapping`:
+
+===========  ==================================================================================
+kind         fields
+===========  ==================================================================================
+ellipsoid    centre, axes, c (or c_consistent, c_printed): s = c − Σ(xᵢ − centreᵢ)²/axesᵢ
+             (the paper's, SPEC §7; not a distance)
+sphere       centre, radius
+torus        centre, axis (default z), R (major), r (minor): a ring of tube radius r
+spheres      centres, radii, signs (default all +1): spheres joined in order; sign −1 carves a
+             sphere out (a nested vesicle: +1 outer, −1 inner, +1 innermost)
+capsule      centre, axis, length, radius: a tube of this length with round ends
+starfish     centre, arms, length, radius, core, plane (default true), axis (default z):
+             ``arms`` capsules of ``radius`` from the centre out to ``length``, in the plane
+             normal to ``axis`` (or spread over the sphere), around a ball of radius ``core``
+discocyte    centre, axis (default z), diameter, c0, c2, c4: the Evans–Fung red-cell profile
+             z(ρ) = ±½ d √(1 − ξ²)(c0 + c2 ξ² + c4 ξ⁴), ξ = 2ρ/d (defaults: the human
+             red cell, c0 = 0.0518, c2 = 2.0026, c4 = −4.491, in units of d)
+file         path: φ of an earlier run (its folder, final.npz, or an .npz with ``phi_grid`` or
+             ``phi`` on a uniform grid), resampled by periodic cubic splines
+===========  ==================================================================================
+
+Joining shapes takes the maximum of their level functions (their union) and carving one out
+the minimum with its negative; the corners this leaves are smoothed by the tanh profile and,
+after a few steps, by the flow.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+
+from .model import ModelError
+
+#: the readings of the paper's printed constant c (SPEC §7 erratum); other kinds have one
+IC_VARIANTS = ("consistent", "printed")
+
+
+# ---------------------------------------------------------------------------------------------
+# geometry helpers (periodic minimum image)
+# ---------------------------------------------------------------------------------------------
+def _offsets(points: np.ndarray, centre, L: float) -> np.ndarray:
+    c = np.asarray(centre, dtype=float).reshape((-1,) + (1,) * (points.ndim - 1))
+    d = points - c
+    d -= L * np.round(d / L)
+    return d
+
+
+def _unit(v, dim: int) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+def _along(d: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The component of the offsets d (dim, ...) along the unit vector ``axis``."""
+    return np.tensordot(axis, d, axes=1)
+
+
+def _segment_distance(d: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance from the points at offsets d (dim, ...) to the segment from a to b."""
+    ab = b - a
+    shape = (-1,) + (1,) * (d.ndim - 1)
+    rel = d - a.reshape(shape)
+    t = np.clip(np.tensordot(ab, rel, axes=1) / float(ab @ ab), 0.0, 1.0)
+    return np.sqrt(np.sum((rel - t * ab.reshape(shape)) ** 2, axis=0))
+
+
+def _directions(k: int, dim: int, plane: bool, axis: np.ndarray) -> list[np.ndarray]:
+    """k unit vectors: evenly spaced in the plane normal to ``axis`` (2D: the plane), or
+    spread over the sphere (6: ±x, ±y, ±z; 4: a tetrahedron; else a Fibonacci lattice)."""
+    if dim == 2 or plane:
+        if dim == 2:
+            e1, e2 = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+        else:
+            helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
+            e1 = np.cross(axis, helper)
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(axis, e1)
+        return [math.cos(2 * math.pi * i / k) * e1 + math.sin(2 * math.pi * i / k) * e2
+                for i in range(k)]
+    if k == 6:
+        return [s * e for e in np.eye(3) for s in (1.0, -1.0)]
+    if k == 4:
+        t = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float) / math.sqrt(3)
+        return list(t)
+    golden = math.pi * (3.0 - math.sqrt(5.0))
+    out = []
+    for i in range(k):
+        z = 1.0 - 2.0 * (i + 0.5) / k
+        rho = math.sqrt(1.0 - z * z)
+        out.append(np.array([rho * math.cos(golden * i), rho * math.sin(golden * i), z]))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# the kinds
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Shape:
+    """Base of the level-set kinds: ``level(points, L, variant) -> (s, scale)``, s > 0 inside
+    and ``scale`` the typical size of s (the unit of ``--perturb``)."""
+
+    kind: ClassVar[str] = ""
+    #: field name -> "vec" | "vecs" | "float+" (positive) | "floats+" | "int+" | "bool" |
+    #: "signs" | "float" | "str"
+    spec: ClassVar[dict] = {}
+    #: fields that may be left out (with their defaults)
+    optional: ClassVar[tuple[str, ...]] = ()
+
+    is_field: ClassVar[bool] = False
+
+    def level(self, points: np.ndarray, L: float, variant: str = "consistent"):
+        raise NotImplementedError
+
+    def volume_estimate(self, variant: str = "consistent") -> float:
+        """Sharp volume enclosed by s = 0 where it has a closed form, else NaN."""
+        return math.nan
+
+    def check(self, dim: int, skip: tuple[str, ...] = ()) -> None:
+        """ModelError if a field does not fit a ``dim``-dimensional scene."""
+        for name, kind in self.spec.items():
+            if name in skip:
+                continue
+            value = getattr(self, name)
+            if kind in ("vec", "vecs"):
+                vecs = [value] if kind == "vec" else list(value)
+                for v in vecs:
+                    if len(v) != dim:
+                        raise ModelError(f"ic.{name} needs {dim} values for a {dim}D scene, "
+                                         f"got {list(v)}")
+                    if not all(math.isfinite(x) for x in v):
+                        raise ModelError(f"ic.{name} must be finite, got {list(v)}")
+                if name == "axis" and not any(v != 0 for v in value):
+                    raise ModelError("ic.axis must be a non-zero vector")
+            elif kind == "float+" and not (math.isfinite(value) and value > 0):
+                raise ModelError(f"ic.{name} must be a positive number, got {value}")
+            elif kind == "floats+" and not all(math.isfinite(v) and v > 0 for v in value):
+                raise ModelError(f"ic.{name} must be positive numbers, got {list(value)}")
+            elif kind == "int+" and not value >= 1:
+                raise ModelError(f"ic.{name} must be a positive integer, got {value}")
+            elif kind == "float" and not math.isfinite(value):
+                raise ModelError(f"ic.{name} must be a finite number, got {value}")
+
+    def to_mapping(self) -> dict:
+        out = {"kind": self.kind}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            out[f.name] = ([list(x) for x in v] if f.name in ("centres",) else
+                           list(v) if isinstance(v, tuple) else v)
+        return out
+
+
+@dataclass(frozen=True)
+class Ellipsoid(Shape):
+    """The paper's initial conditions: s = c − q(x), q = Σ(xᵢ − centreᵢ)²/axesᵢ (SPEC §7)."""
+
+    kind: ClassVar[str] = "ellipsoid"
+    spec: ClassVar[dict] = {"centre": "vec", "axes": "vec", "c_consistent": "float+",
+                            "c_printed": "float+"}
+    centre: tuple[float, ...]
+    axes: tuple[float, ...]
+    c_consistent: float
+    c_printed: float
+
+    def check(self, dim: int) -> None:
+        super().check(dim)
+        if not all(a > 0 for a in self.axes):
+            raise ModelError(f"ic.axes must be positive, got {list(self.axes)}")
+
+    def level(self, points, L, variant="consistent"):
+        d = _offsets(points, self.centre, L)
+        axes = np.asarray(self.axes, dtype=float).reshape((-1,) + (1,) * (points.ndim - 1))
+        q = np.sum(d * d / axes, axis=0)
+        c = self.c_printed if variant == "printed" else self.c_consistent
+        return c - q, c
+
+    def volume_estimate(self, variant="consistent"):
+        c = self.c_printed if variant == "printed" else self.c_consistent
+        return 4.0 / 3.0 * math.pi * math.prod(math.sqrt(c * a) for a in self.axes)
+
+
+@dataclass(frozen=True)
+class Sphere(Shape):
+    """s = R − |x − centre|."""
+
+    kind: ClassVar[str] = "sphere"
+    spec: ClassVar[dict] = {"centre": "vec", "radius": "float+"}
+    centre: tuple[float, ...]
+    radius: float
+
+    def level(self, points, L, variant="consistent"):
+        d = _offsets(points, self.centre, L)
+        return self.radius - np.sqrt(np.sum(d * d, axis=0)), self.radius
+
+    def volume_estimate(self, variant="consistent"):
+        return 4.0 / 3.0 * math.pi * self.radius**3
+
+
+@dataclass(frozen=True)
+class Torus(Shape):
+    """s = r − dist(x, the circle of radius R about ``axis`` through ``centre``) (3D)."""
+
+    kind: ClassVar[str] = "torus"
+    spec: ClassVar[dict] = {"centre": "vec", "axis": "vec", "R": "float+", "r": "float+"}
+    optional: ClassVar[tuple[str, ...]] = ("axis",)
+    centre: tuple[float, ...]
+    R: float
+    r: float
+    axis: tuple[float, ...] = (0.0, 0.0, 1.0)
+
+    def check(self, dim):
+        if dim != 3:
+            raise ModelError("ic kind 'torus' needs a 3D scene")
+        super().check(dim)
+        if self.r >= self.R:
+            raise ModelError(f"ic torus needs r < R (a hole), got R = {self.R}, r = {self.r}")
+
+    def level(self, points, L, variant="consistent"):
+        d = _offsets(points, self.centre, L)
+        n = _unit(self.axis, 3)
+        h = _along(d, n)
+        rho = np.sqrt(np.maximum(np.sum(d * d, axis=0) - h * h, 0.0))
+        return self.r - np.sqrt((rho - self.R) ** 2 + h * h), self.r
+
+    def volume_estimate(self, variant="consistent"):
+        return 2.0 * math.pi**2 * self.R * self.r**2
+
+
+@dataclass(frozen=True)
+class Spheres(Shape):
+    """Spheres joined in order: s ← max(s, dᵢ) for sign +1, min(s, −dᵢ) for sign −1,
+    dᵢ = Rᵢ − |x − cᵢ|. Overlapping spheres make connected beads (a neck where they meet);
+    +1, −1 nested spheres a shell, +1, −1, +1 a vesicle inside a vesicle."""
+
+    kind: ClassVar[str] = "spheres"
+    spec: ClassVar[dict] = {"centres": "vecs", "radii": "floats+", "signs": "signs"}
+    optional: ClassVar[tuple[str, ...]] = ("signs",)
+    centres: tuple[tuple[float, ...], ...]
+    radii: tuple[float, ...]
+    signs: tuple[int, ...] = ()
+
+    def check(self, dim):
+        super().check(dim)
+        if not self.centres or len(self.centres) != len(self.radii):
+            raise ModelError("ic.centres and ic.radii need the same, non-zero number of entries")
+        if self.signs and (len(self.signs) != len(self.radii)
+                           or any(s not in (1, -1) for s in self.signs)):
+            raise ModelError("ic.signs needs one +1 or -1 per sphere")
+
+    def level(self, points, L, variant="consistent"):
+        s = None
+        signs = self.signs or (1,) * len(self.radii)
+        for c, R, sign in zip(self.centres, self.radii, signs, strict=True):
+            d = _offsets(points, c, L)
+            di = R - np.sqrt(np.sum(d * d, axis=0))
+            if s is None:
+                s = di if sign > 0 else -di
+            else:
+                s = np.maximum(s, di) if sign > 0 else np.minimum(s, -di)
+        return s, max(self.radii)
+
+
+@dataclass(frozen=True)
+class Capsule(Shape):
+    """s = radius − dist(x, the segment of ``length`` along ``axis`` centred at ``centre``)."""
+
+    kind: ClassVar[str] = "capsule"
+    spec: ClassVar[dict] = {"centre": "vec", "axis": "vec", "length": "float+",
+                            "radius": "float+"}
+    centre: tuple[float, ...]
+    axis: tuple[float, ...]
+    length: float
+    radius: float
+
+    def level(self, points, L, variant="consistent"):
+        d = _offsets(points, self.centre, L)
+        a = 0.5 * self.length * _unit(self.axis, len(self.centre))
+        return self.radius - _segment_distance(d, -a, a), self.radius
+
+    def volume_estimate(self, variant="consistent"):
+        r = self.radius
+        return math.pi * r * r * self.length + 4.0 / 3.0 * math.pi * r**3
+
+
+@dataclass(frozen=True)
+class Starfish(Shape):
+    """A ball of radius ``core`` with ``arms`` capsules of ``radius`` from the centre out to
+    distance ``length`` (in the plane normal to ``axis``, or spread over the sphere)."""
+
+    kind: ClassVar[str] = "starfish"
+    spec: ClassVar[dict] = {"centre": "vec", "arms": "int+", "length": "float+",
+                            "radius": "float+", "core": "float+", "plane": "bool",
+                            "axis": "vec"}
+    optional: ClassVar[tuple[str, ...]] = ("plane", "axis")
+    centre: tuple[float, ...]
+    arms: int
+    length: float
+    radius: float
+    core: float
+    plane: bool = True
+    axis: tuple[float, ...] = (0.0, 0.0, 1.0)
+
+    def check(self, dim):
+        super().check(dim, skip=("axis",) if dim == 2 else ())  # 2D: the plane is the box
+
+    def level(self, points, L, variant="consistent"):
+        dim = len(self.centre)
+        d = _offsets(points, self.centre, L)
+        s = self.core - np.sqrt(np.sum(d * d, axis=0))
+        axis = _unit(self.axis, dim) if dim == 3 else None
+        zero = np.zeros(dim)
+        for e in _directions(self.arms, dim, self.plane, axis):
+            s = np.maximum(s, self.radius - _segment_distance(d, zero, self.length * e))
+        return s, self.core
+
+
+@dataclass(frozen=True)
+class Discocyte(Shape):
+    """The Evans–Fung red blood cell: s = h(ρ) − |z|, z along ``axis``, ρ the distance from
+    it, h = ½ d √(1 − ξ²)(c0 + c2 ξ² + c4 ξ⁴) for ξ = 2ρ/d < 1 (an approximate distance:
+    exact on the flat parts, compressed at the rim)."""
+
+    kind: ClassVar[str] = "discocyte"
+    spec: ClassVar[dict] = {"centre": "vec", "axis": "vec", "diameter": "float+",
+                            "c0": "float", "c2": "float", "c4": "float"}
+    optional: ClassVar[tuple[str, ...]] = ("axis", "c0", "c2", "c4")
+    centre: tuple[float, ...]
+    diameter: float
+    axis: tuple[float, ...] = (0.0, 0.0, 1.0)
+    c0: float = 0.0518
+    c2: float = 2.0026
+    c4: float = -4.491
+
+    def check(self, dim):
+        if dim != 3:
+            raise ModelError("ic kind 'discocyte' needs a 3D scene")
+        super().check(dim)
+        xi = np.linspace(0.0, 1.0, 201)[:-1]
+        if np.any(self.c0 + self.c2 * xi**2 + self.c4 * xi**4 <= 0):
+            raise ModelError("ic discocyte: c0 + c2 ξ² + c4 ξ⁴ must stay positive on [0, 1)")
+
+    def level(self, points, L, variant="consistent"):
+        d = _offsets(points, self.centre, L)
+        n = _unit(self.axis, 3)
+        z = _along(d, n)
+        rho = np.sqrt(np.maximum(np.sum(d * d, axis=0) - z * z, 0.0))
+        xi2 = np.minimum((2.0 * rho / self.diameter) ** 2, 1.0)
+        h = 0.5 * self.diameter * np.sqrt(1.0 - xi2) * (self.c0 + self.c2 * xi2
+                                                          + self.c4 * xi2 * xi2)
+        outside = np.maximum(rho - 0.5 * self.diameter, 0.0)  # beyond the rim: the distance
+        return np.where(outside > 0, -np.sqrt(outside**2 + z * z), h - np.abs(z)), \
+            0.5 * self.diameter
+
+
+@dataclass(frozen=True)
+class FieldIC(Shape):
+    """φ of an earlier run (``path``) or an array (``grid``), resampled to the new points."""
+
+    kind: ClassVar[str] = "file"
+    spec: ClassVar[dict] = {"path": "str"}
+    is_field: ClassVar[bool] = True
+    path: str = ""
+    grid: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    def check(self, dim):
+        grid = self.values()
+        if grid.ndim != dim:
+            raise ModelError(f"the initial field is {grid.ndim}D, the scene is {dim}D")
+
+    def values(self) -> np.ndarray:
+        return self.grid if self.grid is not None else load_grid_field(self.path)
+
+    def field_values(self, points, L):
+        return resample_periodic(self.values(), L, points)
+
+    def to_mapping(self):
+        if self.grid is not None and not self.path:
+            raise ModelError("an initial field given as an array cannot be stored in a scene "
+                             "file; save it (final.npz) and give its path")
+        return {"kind": "file", "path": str(self.path)}
+
+
+KINDS: dict[str, type[Shape]] = {c.kind: c for c in (Ellipsoid, Sphere, Torus, Spheres, Capsule,
+                                                     Starfish, Discocyte, FieldIC)}
+
+
+def from_field(phi: np.ndarray, path: str = "") -> FieldIC:
+    """Start from ``phi``, a field on a uniform periodic grid (m,)*dim of the scene's box."""
+    return FieldIC(path=str(path), grid=check_grid_field(phi, "the initial field"))
+
+
+# ---------------------------------------------------------------------------------------------
+# fields from files
+# ---------------------------------------------------------------------------------------------
+def check_grid_field(phi, what: str) -> np.ndarray:
+    """``phi`` as a float array of shape (m,)*dim, dim 2 or 3, finite; else ModelError."""
+    phi = np.asarray(phi, dtype=float)
+    if phi.ndim not in (2, 3) or len(set(phi.shape)) != 1 or phi.shape[0] < 4:
+        raise ModelError(f"{what} must be a field on a uniform periodic grid (m, m[, m]), "
+                         f"got shape {phi.shape}")
+    if not np.all(np.isfinite(phi)):
+        raise ModelError(f"{what} has non-finite values")
+    return phi
+
+
+def load_grid_field(path: str | Path) -> np.ndarray:
+    """φ on a uniform grid from a run folder, its final.npz, or any .npz (``phi_grid`` first,
+    else ``phi``); ModelError if it is missing or is not a grid field."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "final.npz"
+    try:
+        with np.load(path) as z:
+            key = "phi_grid" if "phi_grid" in z.files else "phi"
+            if key not in z.files:
+                raise ModelError(f"{path} has no 'phi_grid' or 'phi'")
+            phi = np.array(z[key])
+    except (OSError, ValueError, EOFError) as err:
+        raise ModelError(f"cannot read the initial field {path}: {err}") from None
+    return check_grid_field(phi, f"the field in {path}")
+
+
+def resample_periodic(grid: np.ndarray, L: float, points: np.ndarray) -> np.ndarray:
+    """Values of the periodic grid field ``grid`` (node j at jL/m) at ``points`` (dim, ...):
+    cubic-spline interpolation, exact at the grid nodes."""
+    from scipy import ndimage
+
+    m = grid.shape[0]
+    coords = np.asarray(points, dtype=float).reshape(grid.ndim, -1) * (m / L)
+    values = ndimage.map_coordinates(grid, coords, order=3, mode="grid-wrap")
+    return values.reshape(np.shape(points)[1:])
+
+
+# ---------------------------------------------------------------------------------------------
+# scene files
+# ---------------------------------------------------------------------------------------------
+def _number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _parse(name: str, kind: str, value):
+    bad = ModelError(f"ic.{name} must be {_WHAT[kind]}, got {value!r}")
+    if kind == "vec":
+        if not (isinstance(value, list) and value and all(_number(v) for v in value)):
+            raise bad
+        return tuple(float(v) for v in value)
+    if kind == "vecs":
+        if not (isinstance(value, list) and value and all(
+                isinstance(v, list) and v and all(_number(x) for x in v) for v in value)):
+            raise bad
+        return tuple(tuple(float(x) for x in v) for v in value)
+    if kind in ("floats+", "signs"):
+        if not (isinstance(value, list) and value and all(_number(v) for v in value)):
+            raise bad
+        return tuple(int(v) if kind == "signs" else float(v) for v in value)
+    if kind in ("float+", "float"):
+        if not _number(value):
+            raise bad
+        return float(value)
+    if kind == "int+":
+        if not (isinstance(value, int) and not isinstance(value, bool)):
+            raise bad
+        return value
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise bad
+        return value
+    if not isinstance(value, str):
+        raise bad
+    return value
+
+
+_WHAT = {"vec": "a list of numbers", "vecs": "a list of lists of numbers",
+         "floats+": "a list of positive numbers", "signs": "a list of +1 and -1",
+         "float+": "a positive number", "float": "a number", "int+": "a positive integer",
+         "bool": "true or false", "str": "a string"}
+
+
+def ic_from_mapping(table: dict, dim: int) -> Shape:
+    """An initial condition from the ``[ic]`` table of a scene file; ModelError (one line)
+    for an unknown kind, an unknown, missing or ill-typed field, or a value that does not fit."""
+    table = dict(table)
+    kind = table.pop("kind", None)
+    if kind not in KINDS:
+        raise ModelError(f"ic.kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    cls = KINDS[kind]
+    if cls is Ellipsoid and "c" in table:
+        c = table.pop("c")
+        table.setdefault("c_consistent", c)
+        table.setdefault("c_printed", c)
+    spec = dict(cls.spec)
+    unknown = set(table) - set(spec)
+    if unknown:
+        extra = ", c" if cls is Ellipsoid else ""
+        raise ModelError(f"unknown field(s) ic.{', ic.'.join(sorted(unknown))} for kind "
+                         f"{kind!r}; valid: {', '.join(spec)}{extra}")
+    missing = [k for k in spec if k not in table and k not in cls.optional]
+    if missing:
+        raise ModelError(f"ic kind {kind!r} needs {', '.join('ic.' + k for k in missing)}")
+    values = {k: _parse(k, spec[k], v) for k, v in table.items()}
+    ic = cls(**values)
+    ic.check(dim)
+    return ic

@@ -1,0 +1,72 @@
+"""One registry of what a run is made of: backends (with their options), schemes, constraints.
+
+The command line builds its choices from here, :func:`fem_ade.backend.make_backend` finds
+backends here, and the tests iterate over these tables, so adding an entry is one edit. Data
+only: importing this module imports no backend.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+#: time schemes every backend implements (SPEC §4, §10)
+SCHEMES = {
+    "paper": "the paper's semi-implicit scheme (SPEC §4); needs dt < eps^3/kappa",
+    "stabilized": "linear, one solve per step, energy-stable at >= 100x the paper's dt",
+}
+
+#: how V = α and A = β are enforced
+CONSTRAINTS = {
+    "penalty": "the paper's penalties M1 (V - alpha)^2 + M2 (A - beta)^2",
+    "exact": "V = alpha and A = beta at every step, by Lagrange multipliers inside the step",
+}
+
+#: preconditioners of the FEM step solve (fem_ade.fem.solve)
+FEM_SOLVERS = ("amg", "chebyshev", "jacobi", "fft", "auto")
+
+
+@dataclass(frozen=True)
+class Option:
+    """A backend-specific option: its keyword, type, default, allowed values and help."""
+
+    name: str
+    type: type
+    default: object
+    choices: tuple | None
+    help: str
+
+
+@dataclass(frozen=True)
+class BackendSpec:
+    """A backend: where its class lives ("module:Class") and the options it takes."""
+
+    name: str
+    target: str
+    description: str
+    options: tuple[Option, ...] = ()
+
+    @property
+    def option_names(self) -> tuple[str, ...]:
+        return tuple(o.name for o in self.options)
+
+
+BACKENDS = {
+    "fem": BackendSpec(
+        "fem", "fem_ade.fem.backend:FEMBackend",
+        "mixed (phi, mu) periodic finite elements on hexahedra (quads in 2D)",
+        (
+            Option("order", int, 1, (1, 2), "Q1 or Q2 elements (default 1)"),
+            Option("mesh", str, None, None,
+                   "a periodic hexahedral mesh file (read with meshio), or graded[:g] for a "
+                   "graded tensor mesh (default: uniform, n cells per direction)"),
+            Option("solver", str, "amg", FEM_SOLVERS,
+                   "preconditioner of the PCG step solve: amg (default; flat iteration counts "
+                   "in h and dt), chebyshev or jacobi (cheap smoothers for the mass-dominated "
+                   "paper dt), fft (uniform Q1 only: exact), auto"),
+        ),
+    ),
+    "spectral": BackendSpec(
+        "spectral", "spectral_ref.solver:SpectralBackend",
+        "the compact Fourier-spectral reference (SPEC §6)",
+    ),
+}

@@ -1,0 +1,303 @@
+"""Runs with an output folder: the Python API behind the command line.
+
+:func:`simulate` checks every input, builds the backend, drives it with
+:func:`fem_ade.loop.run_loop` and writes the run folder; :func:`resume` continues a run from its
+checkpoint. Nothing here knows which backend it runs: backend-specific options are checked by
+the backend's own :meth:`~fem_ade.backend.Backend.check` and passed through unread.
+
+A run folder holds ``run.json`` (what :func:`resume` needs), ``history.csv`` (written row by
+row), ``summary.json``, ``final.npz``, the ParaView series ``phi.xdmf`` (+ ``.h5``), with
+``checkpoint_every`` a ``checkpoint.npz``, with ``phi0`` given as an array ``initial.npz``, and
+unless ``render=False`` the pictures ``shape.png`` and ``history.png``. The shape descriptors
+and the pictures are computed once, from the fields in memory.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from .backend import Backend, check_backend, make_backend
+from .constraints import ConstraintError
+from .initial import FieldIC, check_grid_field
+from .loop import AdaptiveDt, LoopState, RunResult, run_loop
+from .model import HISTORY_COLUMNS, ModelError, max_stable_dt
+from .output import (
+    HistoryWriter,
+    check_out_dir,
+    package_versions,
+    read_json,
+    truncate_history,
+    write_fields,
+    write_json_atomic,
+)
+from .scenes import Scene, scene_from_mapping, scene_to_mapping
+from .xdmf import XdmfSeries
+
+#: summary.json → shape: the descriptors of the sharp surface kept at its top level
+SHAPE_KEYS = ("components", "genus", "nested", "reduced_volume", "reduced_area_difference",
+              "arms")
+
+
+def simulate(
+    scene: Scene,
+    *,
+    backend: str = "fem",
+    n: int | None = None,
+    dt: float | None = None,
+    steps: int | None = None,
+    until_steady: float | None = None,
+    max_steps: int = 100_000,
+    every: int = 10,
+    ic: str = "consistent",
+    perturb: float = 0.0,
+    seed: int = 0,
+    phi0=None,
+    scheme: str = "paper",
+    constraints: str = "penalty",
+    adaptive: bool | dict = False,
+    checkpoint_every: int | None = None,
+    save_every: int | None = None,
+    render: bool = True,
+    out: str | Path | None = None,
+    force: bool = False,
+    quiet: bool = True,
+    allow_underresolved: bool = False,
+    backend_options: dict | None = None,
+) -> RunResult:
+    """Run ``scene`` with ``backend`` and, if ``out`` is given, write its run folder there.
+
+    ``phi0``: start from this field instead of the scene's initial condition: an array on a
+    uniform periodic grid (m,)*dim of the scene's box, or the path of an earlier run folder or
+    of its final.npz; it is resampled to the backend's points. All input is checked before
+    anything is written; bad input raises :class:`fem_ade.model.ModelError`.
+
+    ``adaptive=True`` lets Δt range over [Δt/1000, 1000Δt] (the paper's scheme: below ε³/κ);
+    a dict gives the fields of :class:`fem_ade.loop.AdaptiveDt`.
+    """
+    n = scene.n if n is None else n
+    dt = scene.dt if dt is None else dt
+    if steps is None and until_steady is None:
+        steps = scene.steps
+    options = dict(backend_options or {})
+    initial = None
+    if phi0 is not None:
+        if isinstance(phi0, (str, Path)):
+            scene = scene.with_(ic=FieldIC(path=str(Path(phi0).resolve())))
+        else:
+            initial = check_grid_field(phi0, "phi0")
+            scene = scene.with_(ic=FieldIC(grid=initial))
+        scene.ic.check(scene.dim)
+    check_backend(backend, scene, n=n, dt=dt, scheme=scheme, constraints=constraints,
+                  allow_underresolved=allow_underresolved, **options)
+    check_loop_options(steps=steps, until_steady=until_steady, max_steps=max_steps, every=every,
+                       checkpoint_every=checkpoint_every, save_every=save_every)
+    if not (math.isfinite(perturb) and perturb >= 0):
+        raise ModelError(f"--perturb must be a number >= 0, got {perturb}")
+    if not (isinstance(seed, int) and seed >= 0):
+        raise ModelError(f"--seed must be an integer >= 0, got {seed}")
+    if adaptive is True:
+        params = scene.params
+        dt_max = 1000 * dt if scheme == "stabilized" else min(1000 * dt,
+                                                               0.9 * max_stable_dt(params))
+        adaptive = {"dt_min": dt / 1000, "dt_max": max(dt, dt_max)}
+    adaptive = asdict(AdaptiveDt(**adaptive)) if adaptive else None
+    out = check_out_dir(out, force=force) if out is not None else None
+    if out is not None and initial is not None:  # an array start is kept with the run
+        out.mkdir(parents=True, exist_ok=True)
+        write_fields(out / "initial.npz", {"phi": initial})
+        scene = scene.with_(ic=FieldIC(path=str((out / "initial.npz").resolve()), grid=initial))
+    config = {"scene": scene_to_mapping(scene) if out is not None else None,
+              "backend": backend, "n": n, "dt": dt,
+              "steps": steps, "until_steady": until_steady, "max_steps": max_steps,
+              "every": every, "ic": ic, "perturb": perturb, "seed": seed, "scheme": scheme,
+              "constraints": constraints, "adaptive": adaptive,
+              "checkpoint_every": checkpoint_every, "save_every": save_every,
+              "render": render, "backend_options": options}
+    return _execute(out, scene, config, quiet=quiet)
+
+
+def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_every=None,
+                       save_every=None) -> None:
+    """The loop's numbers, before anything is written (ModelError, one line)."""
+    if (steps is None) == (until_steady is None):
+        raise ModelError("give exactly one of steps and until_steady")
+    for name, value, low in (("steps", steps, 0), ("max-steps", max_steps, 1),
+                             ("every", every, 1), ("checkpoint-every", checkpoint_every, 1),
+                             ("save-every", save_every, 1)):
+        if value is None:
+            continue
+        if not (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+                and value >= low):
+            raise ModelError(f"--{name} must be an integer >= {low}, got {value}")
+    if until_steady is not None and not (math.isfinite(until_steady) and until_steady > 0):
+        raise ModelError(f"--until-steady must be a positive number, got {until_steady}")
+
+
+def resume(out: str | Path, *, steps: int | None = None, quiet: bool = True) -> RunResult:
+    """Continue the run in ``out`` from its checkpoint up to step ``steps`` (default: as before).
+
+    The continued run is bit for bit the uninterrupted one.
+    """
+    out = Path(out)
+    if not (out / "run.json").is_file() or not (out / "checkpoint.npz").is_file():
+        raise ModelError(f"cannot resume {out}: it has no run.json and checkpoint.npz "
+                         "(run with --checkpoint-every K, or interrupt with Ctrl-C)")
+    config = read_json(out / "run.json")
+    if steps is not None:
+        if config["until_steady"] is not None:
+            config["max_steps"] = steps
+        else:
+            config["steps"] = steps
+    scene = scene_from_mapping(config["scene"], where=str(out / "run.json"))
+    state, ls = read_checkpoint(out)
+    total = config["steps"] if config["until_steady"] is None else config["max_steps"]
+    if total < ls.k:
+        raise ModelError(f"the checkpoint is at step {ls.k}, past --steps {total}")
+    return _execute(out, scene, config, quiet=quiet, start=(state, ls))
+
+
+# ---------------------------------------------------------------------------------------
+# the run folder
+# ---------------------------------------------------------------------------------------
+def write_checkpoint(out: Path, backend: Backend, ls: LoopState) -> None:
+    """OUT/checkpoint.npz: the backend's state and the loop's, atomically."""
+    state = {f"state__{k}": v for k, v in backend.state().items()}
+    write_fields(out / "checkpoint.npz", state, loop=json.dumps(asdict(ls)))
+
+
+def read_checkpoint(out: Path) -> tuple[dict, LoopState]:
+    with np.load(out / "checkpoint.npz") as z:
+        state = {k[len("state__"):]: z[k] for k in z.files if k.startswith("state__")}
+        ls = LoopState(**json.loads(str(z["loop"])))
+    return state, ls
+
+
+class _Series:
+    """The XDMF time series of a run (ParaView): the backend's point data every K steps."""
+
+    def __init__(self, path: Path, be: Backend):
+        points, cells = be.output_mesh()
+        self.xdmf = XdmfSeries(path, points, cells)
+        self.be, self.last_step = be, None
+
+    def save(self, ls: LoopState) -> None:
+        """Add the backend's current fields at step ``ls.k``, time ``ls.t``."""
+        self.xdmf.write(ls.t, self.be.point_data())
+        self.last_step = ls.k
+
+    def close(self) -> None:
+        self.xdmf.close()
+
+
+def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
+             start: tuple[dict, LoopState] | None = None) -> RunResult:
+    """Build the backend from ``config`` and run it; the one place simulate/resume share."""
+    state, start_ls = start if start is not None else (None, None)
+    try:
+        be = make_backend(config["backend"], scene, n=config["n"], ic=config["ic"],
+                          perturb=config["perturb"], seed=config["seed"],
+                          scheme=config["scheme"], constraints=config["constraints"],
+                          start_state=state, **config["backend_options"])
+    except ConstraintError as err:
+        raise ModelError(f"the initial condition cannot be projected: {err}") from None
+    adaptive = AdaptiveDt(**config["adaptive"]) if config["adaptive"] else None
+    columns = HISTORY_COLUMNS + tuple(be.extra_columns) + (("dt",) if adaptive else ())
+    writer = series = None
+    earlier: list[dict] = []
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        if start is None:
+            write_json_atomic(out / "run.json", config)
+            writer = HistoryWriter(out / "history.csv", columns)
+        else:
+            earlier = truncate_history(out / "history.csv", start_ls.k)
+            writer = HistoryWriter(out / "history.csv", columns, append=True)
+        # the ParaView series: the start, every save_every steps, the end
+        name = "phi.xdmf" if start is None else f"phi-from-{start_ls.k}.xdmf"
+        series = _Series(out / name, be)
+    try:
+        result = run_loop(
+            be, dt=config["dt"], steps=config["steps"], until_steady=config["until_steady"],
+            max_steps=config["max_steps"], every=config["every"], quiet=quiet, history=writer,
+            label=scene.name, adaptive=adaptive, checkpoint_every=config["checkpoint_every"],
+            on_checkpoint=(lambda ls: write_checkpoint(out, be, ls)) if out else None,
+            save_every=config["save_every"], on_save=series.save if series else None,
+            start=start_ls)
+    finally:
+        if writer is not None:
+            writer.close()
+    result.shape, grid = describe_final(be, result.final)
+    if out is not None:
+        _finish(out, be, result, config, series, grid, earlier + result.history)
+    return result
+
+
+def describe_final(be: Backend, final: dict):
+    """(shape descriptors of the final φ = 0 surface or None, (φ on the grid, surface)):
+    3D runs with a finite field (:mod:`fem_ade.shape`)."""
+    from .shape import describe, extract_surface
+
+    p = be.scene.params
+    grid = np.asarray(be.grid_phi())
+    if be.scene.dim != 3 or not np.all(np.isfinite(grid)):
+        return None, (grid, None, None)
+    surface = extract_surface(grid, p.L)
+    d = describe(grid, p.L, V=final.get("V"), A=final.get("A"),
+                 dA=final.get("dA") if p.on("ade") else None, D=p.D, surface=surface)
+    shape = {k: d["sharp"][k] if k in d["sharp"] else d[k] for k in SHAPE_KEYS}
+    shape["diffuse"] = {k: d[k] for k in ("reduced_volume", "reduced_area_difference")}
+    shape["sharp"] = d["sharp"]
+    return shape, (grid, surface, d)
+
+
+def _finish(out: Path, be: Backend, result: RunResult, config: dict, series, grid,
+            rows: list[dict]) -> None:
+    """final.npz, the end of the series, summary.json and the pictures."""
+    phi_grid, surface, descriptors = grid
+    fields = be.fields()
+    if np.shape(fields["phi"]) != phi_grid.shape:  # the field is not on the uniform grid
+        fields["phi_grid"] = phi_grid
+        fields["x"] = np.arange(phi_grid.shape[0]) * (be.scene.params.L / phi_grid.shape[0])
+    write_fields(out / "final.npz", fields, step=result.steps, t=result.t, dt=result.dt,
+                 status=result.status)
+    if series is not None:
+        if series.last_step != result.steps:
+            series.save(LoopState(k=result.steps, t=result.t))
+        series.close()
+    summary = {
+        "scene": be.scene.name,
+        "figure": be.scene.figure,
+        "parameters": be.scene.params.as_dict(),
+        "backend": be.name,
+        "backend_info": be.info(),
+        **{k: config.get(k) for k in ("n", "dt", "scheme", "constraints", "ic", "perturb",
+                                      "seed")},
+        "adaptive": config["adaptive"],
+        "steps": result.steps,
+        "t": result.t,
+        "dt_final": result.dt,
+        "rejected_steps": result.rejected,
+        "status": result.status,
+        "message": result.message,
+        "final": result.final,
+        "shape": result.shape,
+        "wall_s": result.wall_s,
+        "versions": package_versions(),
+    }
+    write_json_atomic(out / "summary.json", summary)
+    if config.get("render", True) and descriptors is not None and rows:
+        from .render import draw_run, run_label
+
+        columns = {c: np.array([float(r.get(c, 0.0)) for r in rows]) for c in rows[0]}
+        try:
+            draw_run(out, phi_grid, be.scene.params, columns, descriptors, surface=surface,
+                     label=run_label(summary, phi_grid.shape[0]))
+        except Exception as err:  # noqa: BLE001 (a picture must never cost the run's results)
+            warnings.warn(f"rendering {out} failed: {err}; the run's results are saved",
+                          stacklevel=2)
