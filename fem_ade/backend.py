@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import importlib
 import math
+from dataclasses import replace
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from .constraints import TargetRamp
 from .model import ModelError, check_resolution
 from .registry import BACKENDS, CONSTRAINTS, SCHEMES
 from .scenes import Scene
@@ -35,6 +37,8 @@ class Backend(Protocol):
     scene: Scene
     #: extra history columns this backend appends after step,t,E,W,G,V,A,dA
     extra_columns: tuple[str, ...]
+    #: False after a step on which E_M was allowed to rise (exact constraints' ramp)
+    dissipative: bool
 
     @classmethod
     def check(cls, scene: Scene, *, n: int, dt: float, scheme: str, constraints: str,
@@ -84,8 +88,9 @@ class BackendBase:
 
     name = "base"
     extra_columns: tuple[str, ...] = ()
-    #: extra columns when the constraints are exact (the multipliers)
-    exact_columns = ("lambda_V", "lambda_A")
+    #: extra columns when the constraints are exact: the multipliers, and the fraction of the
+    #: way the targets have ramped from the initial V₀, A₀ to α, β (fem_ade.constraints)
+    exact_columns = ("lambda_V", "lambda_A", "ramp")
 
     def __init__(self, scene: Scene, *, n: int, scheme: str = "paper",
                  constraints: str = "penalty"):
@@ -93,13 +98,37 @@ class BackendBase:
         self.scheme = scheme
         self.constraints = constraints
         params = scene.params.for_constraints(constraints).validate()
-        self.scene = scene if params is scene.params else scene.with_(effects=params.effects)
+        self.scene = scene if params is scene.params else replace(scene, params=params)
         self.params = params
         self.n = n
         self.exact = constraints == "exact"
         if self.exact:
             self.extra_columns = type(self).extra_columns + self.exact_columns
         self.dt = math.nan
+        self.ramp: TargetRamp | None = None
+
+    # -- exact constraints: the targets' ramp (no physics: numbers in, numbers out) ----------
+    def start_ramp(self, V0: float, A0: float) -> None:
+        """Targets from the initial state's own V₀, A₀ to α, β (:class:`TargetRamp`)."""
+        self.ramp = TargetRamp.between((V0, A0), (self.params.alpha, self.params.beta))
+
+    @property
+    def dissipative(self) -> bool:
+        """False while exact constraints move their targets: E_M may rise on such a step."""
+        return not (self.ramp is not None and self.ramp.moving)
+
+    def ramp_state(self) -> dict:
+        return {"ramp": self.ramp.state()} if self.ramp is not None else {}
+
+    def set_ramp_state(self, state: dict) -> None:
+        """The ramp of a state; a state without one (e.g. of a penalty run) starts at α, β."""
+        if not self.exact:
+            return
+        if "ramp" in state:
+            self.ramp = TargetRamp.from_state(state["ramp"])
+        else:
+            end = (self.params.alpha, self.params.beta)
+            self.ramp = TargetRamp(end, end, 1, k=1)
 
     @classmethod
     def check(cls, scene: Scene, *, n: int, dt: float, scheme: str = "paper",

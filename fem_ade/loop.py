@@ -207,7 +207,7 @@ def run_loop(
                     diag = {"E": math.nan}
                 if not _finite(diag):
                     bad = "a diagnostic is not finite"
-            if (adaptive is not None and bad is None
+            if (adaptive is not None and bad is None and backend.dissipative
                     and diag["E"] > ls.last_E + adaptive.tol * abs(ls.last_E)):
                 bad = f"E_M rose from {ls.last_E:.6g} to {diag['E']:.6g}"
             can_shrink = adaptive is not None and ls.dt * adaptive.shrink >= adaptive.dt_min

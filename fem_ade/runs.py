@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 
 from .backend import Backend, check_backend, make_backend
-from .constraints import ConstraintError
 from .initial import FieldIC, check_grid_field
 from .loop import AdaptiveDt, LoopState, RunResult, run_loop
 from .model import HISTORY_COLUMNS, ModelError, max_stable_dt
@@ -199,13 +198,10 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
              start: tuple[dict, LoopState] | None = None) -> RunResult:
     """Build the backend from ``config`` and run it; the one place simulate/resume share."""
     state, start_ls = start if start is not None else (None, None)
-    try:
-        be = make_backend(config["backend"], scene, n=config["n"], ic=config["ic"],
-                          perturb=config["perturb"], seed=config["seed"],
-                          scheme=config["scheme"], constraints=config["constraints"],
-                          start_state=state, **config["backend_options"])
-    except ConstraintError as err:
-        raise ModelError(f"the initial condition cannot be projected: {err}") from None
+    be = make_backend(config["backend"], scene, n=config["n"], ic=config["ic"],
+                      perturb=config["perturb"], seed=config["seed"], scheme=config["scheme"],
+                      constraints=config["constraints"], start_state=state,
+                      **config["backend_options"])
     adaptive = AdaptiveDt(**config["adaptive"]) if config["adaptive"] else None
     columns = HISTORY_COLUMNS + tuple(be.extra_columns) + (("dt",) if adaptive else ())
     writer = series = None

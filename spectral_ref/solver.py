@@ -26,7 +26,7 @@ import numpy as np
 from scipy import fft
 
 from fem_ade.backend import BackendBase
-from fem_ade.constraints import project, solve_multipliers
+from fem_ade.constraints import solve_multipliers
 from fem_ade.model import ModelError, ratchet_stabilization, stabilization_coefficients
 from fem_ade.xdmf import closed_grid_values, grid_mesh
 
@@ -135,9 +135,10 @@ class SpectralBackend(BackendBase):
             self.set_state(start_state)
         else:
             phi0 = self.initial_field(self.points, ic=ic, perturb=perturb, seed=seed)
-            if self.exact:
-                phi0 = self._project(phi0)[0]
             self._set_hat(self._fwd(phi0))
+            if self.exact:
+                d = self.diagnostics()
+                self.start_ramp(d["V"], d["A"])
         if dt is not None:
             self.set_dt(dt)
 
@@ -201,10 +202,11 @@ class SpectralBackend(BackendBase):
             self._set_hat(self.phi_hat + delta)
             return {}
         lam_V, lam_A = self._constrained_update(self.phi_hat + delta, solve)
-        return {"lambda_V": lam_V, "lambda_A": lam_A}
+        return {"lambda_V": lam_V, "lambda_A": lam_A, "ramp": self.ramp.fraction}
 
     def _constrained_update(self, base_hat, solve):
-        """φⁿ⁺¹ = base − λ_V P⁻¹g_V − λ_A P⁻¹g_A with V = α, A = β (fem_ade.constraints)."""
+        """φⁿ⁺¹ = base − λ_V P⁻¹g_V − λ_A P⁻¹g_A with V, A at this step's targets (α, β once
+        the ramp is done; fem_ade.constraints)."""
         p, dV, phi, lap = self.params, self.dV, self.phi, self.lap
         gV_hat = np.zeros_like(base_hat)
         gV_hat[(0,) * self.dim] = 0.5 * self.n**self.dim  # the transform of the constant ½
@@ -223,23 +225,11 @@ class SpectralBackend(BackendBase):
             J = [JV, [dV * float(np.sum(gA * z)) for z, _ in zs]]
             return volume(u, dV), area(u, lu, p, dV), np.array(J)
 
-        a, b, _ = solve_multipliers(measure, p.alpha, p.beta)
-        self.phi_hat = self._hermitian(base_hat + a * zs_hat[0] + b * zs_hat[1])
-        self.phi, self.lap = fields(a, b)
+        a, b, _ = solve_multipliers(measure, *self.ramp.advance())
+        # φ from φ̂ (not the sums the Newton solve used): the state is φ̂ alone, so that a
+        # resumed run is bit for bit the uninterrupted one
+        self._set_hat(base_hat + a * zs_hat[0] + b * zs_hat[1])
         return -a, -b
-
-    def _project(self, phi):
-        """Project the initial φ onto V = α, A = β (fem_ade.constraints.project)."""
-        p, dV = self.params, self.dV
-
-        def measure(u):
-            lap = self._inv(-self.k2 * self._fwd(u))
-            return (volume(u, dV), area(u, lap, p, dV), np.full_like(u, 0.5),
-                    area_gradient(u, lap, p))
-
-        phi, a, b, _ = project(phi, measure, lambda u, v: dV * float(np.sum(u * v)),
-                               p.alpha, p.beta)
-        return phi, a, b
 
     def _inner(self, a_hat, b_hat) -> float:
         """∫ a b over the box from half-spectra (Parseval with the rfft weights)."""
@@ -290,7 +280,7 @@ class SpectralBackend(BackendBase):
                         area(phi, lap, p, dV), dA)
 
     def state(self) -> dict:
-        state = {"phi_hat": self.phi_hat}  # replaced, never mutated, by step()
+        state = {"phi_hat": self.phi_hat, **self.ramp_state()}  # replaced, never mutated
         if self.stab is not None:
             state["stab"] = np.array(self.stab)
         return state
@@ -303,6 +293,7 @@ class SpectralBackend(BackendBase):
                              f"grid (n = {self.n}, {self.dim}D) needs {shape}")
         self._set_hat(np.array(phi_hat))
         self.stab = tuple(float(v) for v in state["stab"]) if "stab" in state else None
+        self.set_ramp_state(state)
 
     def fields(self) -> dict:
         x = np.arange(self.n) * (self.params.L / self.n)

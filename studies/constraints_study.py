@@ -397,13 +397,8 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
     ``OUT/constraints/check/continuation.json`` and a shape.png per continuation.
     """
     import numpy as np
-    from scipy import fft
 
-    from fem_ade.backend import make_backend
-    from fem_ade.loop import run_loop
-    from fem_ade.output import write_fields, write_json_atomic
-    from fem_ade.render import render_run
-    from fem_ade.scenes import scene_to_mapping
+    from fem_ade.runs import simulate
     from fem_ade.shape import describe
 
     src = out_root / "constraints" / "long" / "discocyte-exact" / "final.npz"
@@ -420,27 +415,21 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
             continue
         scene = scene_for("discocyte", variant)
         cons = "exact" if variant == "exact" else "penalty"
-        if cons == "exact":
-            scene = scene.with_(effects=scene.params.effects - {"volume", "area"})
         dt = factor * scene.dt
-        be = make_backend("spectral", scene, n=n, dt=dt, scheme="stabilized", constraints=cons)
-        be.set_state({"phi_hat": fft.rfftn(phi0)})
-        d0 = be.diagnostics()
-        be.step()  # warm-up, then time 20 steps
-        t0 = time.perf_counter()
-        for _ in range(20):
-            be.step()
-        ms = (time.perf_counter() - t0) / 20
-        be.set_state({"phi_hat": fft.rfftn(phi0)})
-        steps = max(int(budget / (1.3 * ms)) // 500 * 500, 500)
-        r = run_loop(be, dt=dt, steps=steps, every=500, quiet=True)
+        kw = dict(backend="spectral", n=n, dt=dt, scheme="stabilized", constraints=cons,
+                  phi0=phi0, quiet=True)
+        probe = simulate(scene, steps=20, every=20, **kw)  # the step cost sets the length
+        steps = max(int(budget / (1.3 * probe.wall_s / 20)) // 500 * 500, 500)
         out = out_root / "constraints" / "check" / label
-        out.mkdir(parents=True, exist_ok=True)
+        r = simulate(scene, steps=steps, every=500, out=out, force=True, **kw)
+        d0 = r.history[0]
+        with np.load(out / "final.npz") as z:
+            phi1 = np.array(z["phi"])
         sh0 = describe(phi0, scene.params.L)
-        sh1 = describe(be.phi, scene.params.L)
+        sh1 = describe(phi1, scene.params.L)
         pp = scene.params
         bulk0 = bulk_offset(phi0, pp.L, pp.eps, pp.alpha, pp.beta)
-        bulk1 = bulk_offset(be.phi, pp.L, pp.eps, pp.alpha, pp.beta)
+        bulk1 = bulk_offset(phi1, pp.L, pp.eps, pp.alpha, pp.beta)
         keys = ("components", "genus", "reduced_volume", "reduced_area_difference")
         report["runs"][label] = {
             "dt": dt,
@@ -462,37 +451,12 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
             "history": [{k: h[k] for k in ("step", "E", "W", "G", "V", "A")} for h in r.history],
             "rises": energy_rises(r.history),
         }
-        write_fields(out / "final.npz", be.fields(), step=r.steps, t=r.t, dt=dt, status=r.status)
-        write_json_atomic(
-            out / "summary.json",
-            {
-                "scene": "discocyte",
-                "figure": "Fig. 1",
-                "parameters": scene_to_mapping(scene)["params"],
-                "backend": "spectral",
-                "n": n,
-                "dt": dt,
-                "steps": r.steps,
-                "t": r.t,
-                "status": r.status,
-                "final": r.final,
-            },
-        )
-        (out / "history.csv").write_text(
-            "step,E,W,G,V,A\n"
-            + "".join(
-                f"{h['step']},{h['E']!r},{h['W']!r},{h['G']!r},{h['V']!r},{h['A']!r}\n"
-                for h in r.history
-            )
-        )
-        try:
-            render_run(out, quiet=True)
-        except Exception as err:  # noqa: BLE001 - a picture must not cost the numbers
-            report["runs"][label]["render_error"] = str(err)
-        (out / "final.npz").unlink()
+        for f in ("final.npz", "run.json", "initial.npz", "phi.h5", "phi.xdmf"):
+            (out / f).unlink(missing_ok=True)
         if not quiet:
             print(label, json.dumps(report["runs"][label]["end"]), flush=True)
-    write_json_atomic(out_root / "constraints" / "check" / "continuation.json", report)
+    rep_path.parent.mkdir(parents=True, exist_ok=True)
+    rep_path.write_text(json.dumps(report, indent=1, default=str))
     return report
 
 
@@ -786,7 +750,8 @@ def write_report(out_root: Path, scenes, variants) -> Path:
     return path
 
 
-def main(argv=None) -> None:
+def main(argv=None) -> list[dict]:
+    """Run the study (see the module docstring); return the cases run (their case.json)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default="studies/results", help="results root (default %(default)s)")
     ap.add_argument(
@@ -836,8 +801,8 @@ def main(argv=None) -> None:
     variants = args.variants or list(VARIANTS)
     trial_steps, every = (10, 5) if args.quick else (args.trial_steps, args.every)
     if args.check:
-        continuation_check(out_root, budget=args.budget, labels=args.check_runs)
-        return
+        report = continuation_check(out_root, budget=args.budget, labels=args.check_runs)
+        return list(report["runs"].values())
     if args.dt_trial:
         for name in scenes:
             for variant in variants:
@@ -848,7 +813,7 @@ def main(argv=None) -> None:
                         f"largest {e.get('max_rise_rel')}",
                         flush=True,
                     )
-        return
+        return []
     if args.clean:
         root = out_root / "constraints"
         for cj in sorted(root.rglob("case.json")):
@@ -856,6 +821,7 @@ def main(argv=None) -> None:
                 print(f"bulk offset measured: {cj.parent}")
         for fp in clean(root):
             print(f"deleted {fp}")
+    cases = []
     if not args.report_only:
         subdir = SETS[1][0] if args.long else SETS[0][0]
         (out_root / subdir).mkdir(parents=True, exist_ok=True)
@@ -874,6 +840,7 @@ def main(argv=None) -> None:
                     quiet=False,
                     subdir=subdir,
                 )
+                cases.append(c)
                 print(
                     f"{name}-{variant}: {c['status']} after {c.get('steps')} steps, "
                     f"{c.get('wall_s', 0):.1f} s; elapsed {time.perf_counter() - t0:.0f} s",
@@ -883,6 +850,7 @@ def main(argv=None) -> None:
         out_root, list(SCENES) if args.report_only or not args.quick else scenes, variants
     )
     print(f"wrote {path}")
+    return cases
 
 
 if __name__ == "__main__":

@@ -81,6 +81,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (a test runs this)")
     ap.add_argument("--study", choices=("ellipse-2d", "discocyte", "all"), default="all")
+    ap.add_argument("--out", help="unused (the study prints its figures)")
     args = ap.parse_args(argv)
     from fem_ade.scenes import get_scene
 

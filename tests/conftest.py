@@ -1,4 +1,4 @@
-"""Shared fixtures: small helpers to run scenes through the driver without the CLI."""
+"""Shared fixtures: seeded randomness, floating-point errors as exceptions, the CLI helper."""
 
 import os
 import sys
@@ -14,12 +14,23 @@ def _seed():
     np.random.seed(0)
 
 
-def run_cli(args, cwd=None):
+@pytest.fixture(autouse=True)
+def _floating_point_errors_raise():
+    """Overflow, division by zero and invalid operations raise FloatingPointError (py-pde's
+    habit): a NaN the code does not expect fails the test where it is made. The time loop
+    catches it as a divergence (exit code 3). Underflow (e.g. tanh far from the membrane) is
+    harmless and stays silent."""
+    with np.errstate(all="raise", under="ignore"):
+        yield
+
+
+def run_cli(args, cwd=None, env=None):
     """Run ``python -m fem_ade.run ARGS``; return the CompletedProcess (text mode)."""
     import subprocess
 
     return subprocess.run([sys.executable, "-m", "fem_ade.run", *map(str, args)],
-                          capture_output=True, text=True, cwd=cwd, timeout=600)
+                          capture_output=True, text=True, cwd=cwd, timeout=600,
+                          env=None if env is None else {**os.environ, **env})
 
 
 @pytest.fixture

@@ -13,7 +13,7 @@ COLUMNS = ["step", "t", "E", "W", "G", "V", "A", "dA"]
 def test_cli_end_to_end(cli, tmp_path):
     out = tmp_path / "D"
     r = cli(["discocyte", "--backend", "spectral", "--n", "32", "--steps", "100", "--every", "50",
-             "--out", out])
+             "--out", out, "--no-render"])
     assert r.returncode == 0, r.stderr
     assert "completed 100 steps" in r.stdout
     h = read_history(out / "history.csv")
@@ -41,33 +41,38 @@ def test_cli_list(cli):
 def test_until_steady_stops(cli, tmp_path):
     out = tmp_path / "S"
     r = cli(["sphere", "--n", "32", "--until-steady", "1e-4", "--every", "5", "--out", out,
-             "--quiet", "--backend", "spectral"])
+             "--quiet", "--backend", "spectral", "--no-render"])
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["status"] == "steady" and s["steps"] == 5
 
 
-@pytest.mark.parametrize("backend", ["spectral", "fem"])
-def test_printed_ic_diverges_cleanly(cli, tmp_path, backend):
-    """The printed discocyte IC at its paper Δt: exit 3 with a diagnosis (the spectral
-    backend, measured) or a stable run (Q1 with lumped mass damps the grid modes that the
-    explicit area penalty excites, measured at n = 32); never a non-finite row."""
+def test_printed_ic_diverges_cleanly_on_the_spectral_grid(cli, tmp_path):
+    """The printed discocyte IC (A = 4.5 β) at its paper Δt: the spectral backend stops at
+    step 3 with exit 3 and the diagnosis; no non-finite row, the last finite state saved."""
     out = tmp_path / "P"
     r = cli(["discocyte", "--ic", "printed", "--n", "32", "--steps", "100", "--every", "1",
-             "--out", out, "--quiet", "--backend", backend])
+             "--out", out, "--quiet", "--backend", "spectral", "--no-render"])
+    assert r.returncode == 3, r.stdout + r.stderr
+    assert "explicit area penalty" in r.stderr and "diverged at step" in r.stderr
     h = read_history(out / "history.csv")
     assert all(np.all(np.isfinite(v)) for v in h.values())
     final = np.load(out / "final.npz")
-    assert np.all(np.isfinite(final["phi"]))
-    status = json.loads((out / "summary.json").read_text())["status"]
-    if backend == "spectral":
-        assert r.returncode == 3, r.stdout + r.stderr
-    if r.returncode == 3:
-        assert "explicit area penalty" in r.stderr and "diverged at step" in r.stderr
-        assert str(final["status"]) == "diverged" and status == "diverged"
-    else:
-        assert r.returncode == 0 and status == "completed", r.stderr
-        assert np.abs(final["phi"]).max() <= 2
+    assert np.all(np.isfinite(final["phi"])) and str(final["status"]) == "diverged"
+    assert json.loads((out / "summary.json").read_text())["status"] == "diverged"
+
+
+def test_printed_ic_runs_on_the_fem_mesh(cli, tmp_path):
+    """The same case on Q1 (n = 24) completes with E_M falling at every step (measured: from
+    1.8e4 to 80.6 in 100 steps, max|φ| 1.007): the lumped Q1 Laplacian's largest eigenvalue,
+    12/h², is 2.5× below the spectral 3π²/h², so the explicit area diffusion stays stable."""
+    out = tmp_path / "P"
+    r = cli(["discocyte", "--ic", "printed", "--n", "24", "--allow-underresolved", "--steps",
+             "100", "--every", "1", "--out", out, "--quiet", "--no-render"])
+    assert r.returncode == 0, r.stderr
+    h = read_history(out / "history.csv")
+    assert np.all(np.diff(h["E"]) < 0)
+    assert np.abs(np.load(out / "final.npz")["phi"]).max() < 1.02
 
 
 BAD = [
@@ -114,10 +119,11 @@ def test_existing_out_dir(cli, tmp_path):
     out = tmp_path / "full"
     out.mkdir()
     (out / "keep.txt").write_text("precious")
-    r = cli(["sphere", "--n", "16", "--steps", "2", "--out", out, "--allow-underresolved"])
+    r = cli(["sphere", "--n", "16", "--steps", "2", "--out", out, "--allow-underresolved",
+             "--no-render"])
     assert r.returncode == 2 and "not empty" in r.stderr
     assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
     r = cli(["sphere", "--n", "16", "--steps", "2", "--out", out, "--allow-underresolved",
-             "--force", "--quiet"])
+             "--force", "--quiet", "--no-render"])
     assert r.returncode == 0, r.stderr
     assert (out / "keep.txt").read_text() == "precious" and (out / "history.csv").exists()

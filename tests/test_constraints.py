@@ -1,21 +1,36 @@
-"""Exact volume and area constraints (issue 6): held to 1e-8 at every record, energy decays."""
+"""Exact volume and area constraints: every scene starts under them (its targets ramp from the
+initial V₀, A₀ to α, β), then V = α and A = β hold to 1e-8 and E_M decays."""
 
 import json
 
 import numpy as np
 import pytest
 
-from fem_ade.constraints import ConstraintError, project
+from fem_ade.backend import make_backend
+from fem_ade.constraints import TargetRamp
+from fem_ade.loop import run_loop
 from fem_ade.output import read_history
-from fem_ade.scenes import get_scene
-from spectral_ref import SpectralBackend
-from spectral_ref.solver import area, area_gradient, volume
+from fem_ade.scenes import PAPER_SCENES, get_scene
 
 ALPHA, BETA = 0.0289, 0.4880  # discocyte
 
 
+def test_target_ramp():
+    r = TargetRamp.between((1.0, 2.0), (1.05, 1.0), rate=0.01)
+    assert r.steps == 50  # |1/2 - 1| / 0.01
+    first = r.advance()
+    assert first == pytest.approx((1.001, 1.98)) and r.moving
+    for _ in range(49):
+        last = r.advance()
+    assert last == (1.05, 1.0) and r.fraction == 1.0 and r.moving
+    r.advance()
+    assert not r.moving  # the targets stood still on this step
+    again = TargetRamp.from_state(r.state())
+    assert again == r
+
+
 @pytest.mark.parametrize("scheme, dt, steps",
-                         [("paper", "5e-7", 200), ("stabilized", "5e-5", 300)])
+                         [("paper", "5e-7", 120), ("stabilized", "5e-5", 120)])
 def test_exact_constraints_hold_and_energy_decays(cli, tmp_path, scheme, dt, steps):
     out = tmp_path / "X"
     r = cli(["discocyte", "--constraints", "exact", "--backend", "spectral", "--n", "32",
@@ -23,43 +38,75 @@ def test_exact_constraints_hold_and_energy_decays(cli, tmp_path, scheme, dt, ste
              "--quiet", "--no-render"])
     assert r.returncode == 0, r.stderr
     h = read_history(out / "history.csv")
-    dv, da = np.abs(h["V"] / ALPHA - 1).max(), np.abs(h["A"] / BETA - 1).max()
-    print(f"max |V/alpha - 1| = {dv:.2g}, max |A/beta - 1| = {da:.2g}")
+    done = h["ramp"] == 1.0
+    assert done.sum() >= 8, "the ramp of discocyte takes 17 steps"
+    dv = np.abs(h["V"][done] / ALPHA - 1).max()
+    da = np.abs(h["A"][done] / BETA - 1).max()
+    print(f"after the ramp: max |V/alpha - 1| = {dv:.2g}, max |A/beta - 1| = {da:.2g}")
     assert dv < 1e-8 and da < 1e-8
     assert np.allclose(h["E"], h["W"] + h["G"], rtol=1e-14)  # the penalties are off
-    assert np.all(np.diff(h["E"]) <= 0)
+    assert np.all(np.diff(h["E"][done]) <= 0)
     assert np.all(h["lambda_V"][1:] != 0) and np.all(np.isfinite(h["lambda_A"]))
     s = json.loads((out / "summary.json").read_text())
     assert s["constraints"] == "exact" and "volume" not in s["parameters"]["effects"]
 
 
-def test_projection_converges_quadratically_on_a_sphere():
-    """The Newton projection of a slightly wrong sphere needs only a few iterations."""
-    scene = get_scene("sphere")
-    be = SpectralBackend(scene, n=32, dt=scene.dt, constraints="exact")
+def _start_under_exact(backend, name, n):
+    scene = PAPER_SCENES[name]
+    dt = 100 * scene.dt
+    be = make_backend(backend, scene, n=n, scheme="stabilized", constraints="exact", dt=dt)
+    ramp = be.ramp.steps
+    res = run_loop(be, dt=dt, steps=ramp + 10, every=5)
     p = scene.params
-    d = be.diagnostics()
-    assert abs(d["V"] / p.alpha - 1) < 1e-10 and abs(d["A"] / p.beta - 1) < 1e-10
-    x = np.arange(32) / 32
-    X = np.stack(np.meshgrid(x, x, x, indexing="ij"))
-    phi = scene.initial_phi(X, perturb=0.02, seed=1)
-
-    def measure(u):
-        lap = be._inv(-be.k2 * be._fwd(u))
-        return (volume(u, be.dV), area(u, lap, p, be.dV), np.full_like(u, 0.5),
-                area_gradient(u, lap, p))
-
-    _, a, b, its = project(phi, measure, lambda u, v: be.dV * np.sum(u * v), p.alpha, p.beta)
-    print("Newton iterations:", its)
-    assert its <= 6
+    E = np.array([row["E"] for row in res.history if row["step"] >= ramp])
+    dv, da = abs(res.final["V"] / p.alpha - 1), abs(res.final["A"] / p.beta - 1)
+    print(f"{name} [{backend}]: ramp {ramp} steps, then |V/alpha - 1| = {dv:.1e}, "
+          f"|A/beta - 1| = {da:.1e}")
+    assert res.status == "completed", res.message
+    assert dv < 1e-8 and da < 1e-8
+    assert np.all(np.diff(E) <= 1e-12 * np.abs(E[1:]))
 
 
-def test_unreachable_constraints_fail_clearly(cli, tmp_path):
-    """The printed IC (A = 4.5 β) cannot be projected: exit 2 with the reason."""
-    r = cli(["discocyte", "--constraints", "exact", "--ic", "printed", "--n", "32",
-             "--backend", "spectral", "--out", tmp_path / "never"])
-    assert r.returncode == 2 and "cannot be projected" in r.stderr
-    assert not (tmp_path / "never").exists()
-    with pytest.raises(ConstraintError):
-        project(np.zeros(4), lambda u: (0.0, 0.0, u + 1, u + 1), lambda u, v: np.sum(u * v),
-                1.0, 1.0)
+@pytest.mark.parametrize("name", list(PAPER_SCENES))
+def test_every_paper_scene_starts_under_exact_constraints(name):
+    """Issue 10: the paper's initial fields have A up to 2.2 β; the targets ramp from the
+    initial V₀, A₀ (measured: 17–55 steps), then hold (spectral, n = 32; nested n = 48)."""
+    _start_under_exact("spectral", name, 48 if name == "nested" else 32)
+
+
+def test_fem_starts_under_exact_constraints():
+    """Six-arm stopped at step 0 before the ramp (its projection did not converge); n = 32 is
+    the coarsest grid where its multipliers converge through the ramp (at n = 24, h = 2ε, the
+    Newton solve fails at step 28 and the run stops as diverged)."""
+    _start_under_exact("fem", "six-arm", 32)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(PAPER_SCENES))
+def test_every_paper_scene_starts_under_exact_constraints_fem(name):
+    _start_under_exact("fem", name, 48 if name == "nested" else 32)
+
+
+def test_printed_ic_ramps_to_the_constraints(cli, tmp_path):
+    """The printed discocyte IC (V = 4.8 α, A = 4.5 β) ramps in 80 steps, then holds."""
+    out = tmp_path / "P"
+    r = cli(["discocyte", "--constraints", "exact", "--ic", "printed", "--n", "24",
+             "--allow-underresolved", "--backend", "spectral", "--steps", "90", "--every",
+             "10", "--out", out, "--quiet", "--no-render"])
+    assert r.returncode == 0, r.stderr
+    h = read_history(out / "history.csv")
+    assert h["V"][0] / ALPHA > 4 and h["A"][0] / BETA > 3
+    assert abs(h["V"][-1] / ALPHA - 1) < 1e-8 and abs(h["A"][-1] / BETA - 1) < 1e-8
+    assert list(h["ramp"][-2:]) == [1.0, 1.0]
+
+
+def test_exact_constraints_report_the_same_V_and_A_in_every_backend():
+    """Directly built backends obey the exact ⇒ no penalties rule (issue 9)."""
+    scene = get_scene("discocyte")
+    for backend in ("spectral", "fem"):
+        be = make_backend(backend, scene, n=16, constraints="exact", dt=scene.dt,
+                          **({"order": 1} if backend == "fem" else {}))
+        assert not be.params.on("volume") and not be.params.on("area")
+        assert be.scene.params is be.params
+        d = be.diagnostics()
+        assert d["E"] == d["W"] + d["G"]

@@ -103,20 +103,26 @@ def test_off_effects_are_not_evaluated(monkeypatch):
     assert d["E"] == pytest.approx(d["W"])
 
 
-@pytest.mark.parametrize("order,ns", [(1, (24, 32, 48)), (2, (12, 16, 24))])
-def test_sphere_values_converge(order, ns):
-    """SPEC §8: V, A, ΔA of the interpolated sphere approach their h → 0 values."""
+@pytest.mark.parametrize("order,ns,rate", [(1, (24, 32, 48), (1.7, 2.3)),
+                                           (2, (12, 16, 24), (3.3, 4.5))])
+def test_sphere_values_converge(order, ns, rate):
+    """SPEC §8: the diffuse sphere's A converges at rate 2 (Q1) and 4 (Q2: nodal quadrature
+    of Simpson type) to its h → 0 value (measured 1.91 and 3.73); V agrees to the formula's own
+    truncation, O((ε/R)⁴) (measured 3.3e-5 on the finest grids; Q2 at n = 12: 2.2e-4)."""
     scene = get_scene("sphere")
     p = scene.params
     exact = sphere_values(0.25, p.eps, p.D)
     errs = []
     for n in ns:
-        d = FEMBackend(scene, n=n, dt=scene.dt, order=order).diagnostics()
+        d = FEMBackend(scene, n=n, order=order).diagnostics()
         errs.append([abs(d[q] / exact[q] - 1) for q in ("V", "A", "dA")])
     errs = np.array(errs)
-    print(f"Q{order} sphere relative errors (V, A, dA) at n={ns}:\n{errs}")
-    assert (errs[-1] < errs[0]).all()
-    assert errs[-1].max() < (1e-2 if order == 1 else 1e-3)
+    observed = np.polyfit(np.log(1.0 / np.array(ns)), np.log(errs[:, 1]), 1)[0]
+    print(f"Q{order} sphere relative errors (V, A, dA) at n={ns}:\n{errs}\n"
+          f"observed rate in A: {observed:.2f}")
+    assert rate[0] < observed < rate[1], f"rate {observed:.2f} outside {rate}"
+    assert errs[-1, 0] < 1e-4
+    assert errs[-1, 2] < errs[0, 2] / 2
 
 
 def test_solvers_agree_and_auto_choice():
@@ -138,18 +144,6 @@ def test_solvers_agree_and_auto_choice():
         FEMBackend(scene, n=12, dt=scene.dt, solver="fft", mesh="graded")
     with pytest.raises(ModelError, match="unknown FEM solver"):
         FEMBackend(scene, n=12, dt=scene.dt, solver="lu")
-
-
-def test_exact_constraints_hold_V_and_A():
-    scene = get_scene("discocyte")
-    scene = scene.with_(effects=scene.params.effects - {"volume", "area"})
-    b = FEMBackend(scene, n=16, dt=scene.dt, constraints="exact")
-    assert b.extra_columns == ("krylov_its", "solve_s", "lambda_V", "lambda_A")
-    for _ in range(3):
-        extra = b.step()
-    d, p = b.diagnostics(), scene.params
-    assert abs(d["V"] / p.alpha - 1) < 1e-9 and abs(d["A"] / p.beta - 1) < 1e-9
-    assert np.isfinite(extra["lambda_V"]) and np.isfinite(extra["lambda_A"])
 
 
 @pytest.mark.parametrize("order,mesh", [(1, None), (2, None), (1, "graded")])

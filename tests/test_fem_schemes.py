@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from fem_ade.fem import FEMBackend
-from fem_ade.output import read_history
 from fem_ade.scenes import get_scene
 
 spectral = pytest.importorskip("spectral_ref.solver")
@@ -36,15 +35,16 @@ def check_decay(E, phimax, its, label):
     assert phimax.max() <= 1.2
 
 
-def test_stabilized_discocyte_100x():
-    """The issue's "done when": discocyte, Q1 n = 32, Δt = 5e-5 (100× the paper's), 500 steps,
-    every 10: E_M non-increasing at every record, max|φ| ≤ 1.2.
+@pytest.mark.parametrize("n, steps", [(20, 120), pytest.param(32, 500, marks=pytest.mark.slow)])
+def test_stabilized_discocyte_100x(n, steps):
+    """Issue 4's "done when" (slow: n = 32, 500 steps): discocyte, Q1, Δt = 5e-5 (100× the
+    paper's), every 10: E_M non-increasing at every record, max|φ| ≤ 1.2.
 
-    Measured: mean 3.4 (max 5) PCG its per step, 0.03 s per step (≈ 17 s in all).
+    Measured at n = 32: mean 3.4 (max 5) PCG its per step, 0.03 s per step.
     """
     scene = get_scene("discocyte")
-    E, phimax, its, b = run_stabilized(scene, 32, 5e-5, 500, 10)
-    check_decay(E, phimax, its, "discocyte Q1 n=32, dt=5e-5, 500 steps")
+    E, phimax, its, b = run_stabilized(scene, n, 5e-5, steps, 10)
+    check_decay(E, phimax, its, f"discocyte Q1 n={n}, dt=5e-5, {steps} steps")
     assert its.max() <= 15 and len(b.stepper._solvers) <= 4
 
 
@@ -132,12 +132,14 @@ def test_stabilized_solvers_agree():
 
 @pytest.mark.parametrize("scheme", ["paper", "stabilized"])
 def test_exact_constraints_backend(scheme):
-    """Multipliers inside the step: V = α, A = β to 1e-10 after every step; λ not /Δt."""
+    """Multipliers inside the step: once the targets' ramp is done, V = α, A = β to 1e-10
+    after every step, λ finite, the warm starts in the state, E_M non-increasing."""
     scene = get_scene("discocyte")
-    scene = scene.with_(effects=scene.params.effects - {"volume", "area"})
     dt = scene.dt if scheme == "paper" else 100 * scene.dt
     b = FEMBackend(scene, n=16, dt=dt, constraints="exact", scheme=scheme)
-    p = scene.params
+    p = b.params
+    for _ in range(b.ramp.steps):
+        b.step()
     E = [b.diagnostics()["E"]]
     for _ in range(5):
         extra = b.step()
@@ -145,26 +147,9 @@ def test_exact_constraints_backend(scheme):
         assert abs(d["V"] / p.alpha - 1) < 1e-10 and abs(d["A"] / p.beta - 1) < 1e-10
         E.append(d["E"])
     assert np.isfinite(extra["lambda_V"]) and np.isfinite(extra["lambda_A"])
-    assert "z_V" in b.state() and "z_A" in b.state()
+    assert extra["ramp"] == 1.0 and not b.ramp.moving
+    assert "z_V" in b.state() and "z_A" in b.state() and "ramp" in b.state()
     assert np.all(np.diff(E) <= 0)
-
-
-def test_exact_constraints_cli(cli, tmp_path):
-    """``discocyte --constraints exact --backend fem --n 32 --steps 200``: |V/α − 1| and
-    |A/β − 1| < 1e-8 at every record, E non-increasing (measured ≈ 27 s, 11–13 PCG its per
-    step for the three solves)."""
-    out = tmp_path / "X"
-    r = cli(["discocyte", "--constraints", "exact", "--backend", "fem", "--n", "32",
-             "--steps", "200", "--every", "10", "--out", out, "--quiet", "--no-render"])
-    assert r.returncode == 0, r.stderr
-    h = read_history(out / "history.csv")
-    p = get_scene("discocyte").params
-    dv, da = np.abs(h["V"] / p.alpha - 1).max(), np.abs(h["A"] / p.beta - 1).max()
-    print(f"\nFEM exact: max |V/alpha - 1| = {dv:.2g}, max |A/beta - 1| = {da:.2g}, "
-          f"lambda_V {h['lambda_V'][-1]:.4g}, lambda_A {h['lambda_A'][-1]:.4g}")
-    assert dv < 1e-8 and da < 1e-8
-    assert np.all(np.diff(h["E"]) <= 0)
-    assert np.all(h["lambda_V"][1:] != 0) and np.all(np.isfinite(h["lambda_A"]))
 
 
 def test_preconditioner_shift():

@@ -102,7 +102,8 @@ class NaiveADE:
 
 def _run_cli(scene, n, steps, every, out):
     cmd = [sys.executable, "-m", "fem_ade.run", scene, "--backend", "spectral", "--n", str(n),
-           "--steps", str(steps), "--every", str(every), "--out", str(out), "--quiet"]
+           "--steps", str(steps), "--every", str(every), "--out", str(out), "--quiet",
+           "--no-render"]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, f"CLI failed:\n{res.stdout}\n{res.stderr}"
     with open(out / "history.csv", newline="") as fh:

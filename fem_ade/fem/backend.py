@@ -67,9 +67,11 @@ class FEMBackend(BackendBase):
         else:
             phi = np.asarray(self.initial_field(self.ops.doflocs, ic=ic, perturb=perturb,
                                                 seed=seed), dtype=float)
-            if self.exact:  # V = α, A = β: the initial condition is projected once
-                phi = self.stepper.project(phi)
             self._set(phi, None)
+            if self.exact:
+                d = self.diagnostics()
+                self.start_ramp(d["V"], d["A"])
+                self.stepper.ramp = self.ramp
         self._out = None
         self._setup = {"assembly_s": t1 - t0, "initial_s": time.perf_counter() - t1}
         if dt is not None:
@@ -112,7 +114,8 @@ class FEMBackend(BackendBase):
         self.mu = self.Kphi / self.w  # μ = −Δφ with the lumped mass: M_L μ = K φ
 
     def state(self) -> dict[str, np.ndarray]:
-        s = {"phi": self.phi.copy(), "mu": self.mu.copy(), **self.stepper.state()}
+        s = {"phi": self.phi.copy(), "mu": self.mu.copy(), **self.stepper.state(),
+             **self.ramp_state()}
         if self.phi_prev is not None:
             s["phi_prev"] = self.phi_prev.copy()
         return s
@@ -125,6 +128,8 @@ class FEMBackend(BackendBase):
         prev = state.get("phi_prev")
         self._set(phi, None if prev is None else np.array(prev, dtype=float).ravel())
         self.stepper.set_state(state)
+        self.set_ramp_state(state)
+        self.stepper.ramp = self.ramp
 
     # -- the step ----------------------------------------------------------------------------
     def step(self) -> dict:

@@ -26,7 +26,8 @@ of its 5 % grid (:data:`fem_ade.fem.solve.SHIFT_GRID`).
 
 Exact constraints (:mod:`fem_ade.constraints`): φⁿ⁺¹ = φⁿ + δ₀ + a z_V + b z_A, z = P⁻¹b (P the
 scheme's step operator; two extra PCG solves, warm-started from the previous step's z), (a, b)
-by :func:`fem_ade.constraints.solve_multipliers`; λ_V = −a, λ_A = −b.
+by :func:`fem_ade.constraints.solve_multipliers` at the step's targets (their ramp from the
+initial V₀, A₀ to α, β); λ_V = −a, λ_A = −b.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from ..constraints import project, solve_multipliers
+from ..constraints import solve_multipliers
 from ..model import ModelError, Params, ratchet_stabilization, stabilization_coefficients
 from . import forms
 from .solve import StepSolver, _dot
@@ -77,6 +78,7 @@ class MixedStep:
         self._preconditioners: dict = {}  # B⁻¹ of M_t + sK by (kind, s), shared (stabilized)
         self.dt = math.nan
         self.solver: StepSolver | None = None
+        self.ramp = None  # the exact constraints' targets (fem_ade.constraints.TargetRamp)
 
     # -- linear algebra ---------------------------------------------------------------------
     def weak(self, a, c) -> np.ndarray:
@@ -207,11 +209,12 @@ class MixedStep:
         if self.exact:
             base, lam_V, lam_A, its_z = self._constrained_update(phi, Kphi, base, low_rank)
             its += its_z
-            extra = {"lambda_V": lam_V, "lambda_A": lam_A}
+            extra = {"lambda_V": lam_V, "lambda_A": lam_A, "ramp": self.ramp.fraction}
         return base, {"krylov_its": int(its), "solve_s": time.perf_counter() - t0, **extra}
 
     def _constrained_update(self, phi, Kphi, base, low_rank):
-        """φⁿ⁺¹ = base + a z_V + b z_A with V = α, A = β: (φⁿ⁺¹, λ_V, λ_A, PCG its)."""
+        """φⁿ⁺¹ = base + a z_V + b z_A with V, A at this step's targets (α, β once the ramp is
+        done): (φⁿ⁺¹, λ_V, λ_A, PCG its)."""
         p, w = self.params, self.w
         bs = [forms.volume_gradient(w), self.area_gradient(phi, Kphi)]
         zs, its = [], 0
@@ -234,22 +237,8 @@ class MixedStep:
             J = np.array([JV, [_dot(gA, z) for z in zs]])
             return forms.volume(u, w), forms.area(u, Ku, w, p.eps), J
 
-        a, b, _ = solve_multipliers(measure, p.alpha, p.beta)
+        a, b, _ = solve_multipliers(measure, *self.ramp.advance())
         return fields(a, b)[0], -a, -b, its
-
-    def project(self, phi):
-        """Project the initial φ onto V = α, A = β (:func:`fem_ade.constraints.project`),
-        moving along the L² gradients (the functionals' Riesz representers in M_L)."""
-        p, w = self.params, self.w
-
-        def measure(u):
-            Ku = self.K @ u
-            s, c = forms.area_gradient(u, p.eps)
-            return (forms.volume(u, w), forms.area(u, Ku, w, p.eps),
-                    forms.volume_gradient(w) / w, s * Ku / w + c)
-
-        phi, a, b, _ = project(phi, measure, lambda u, v: _dot(w, u * v), p.alpha, p.beta)
-        return phi
 
     # -- state ------------------------------------------------------------------------------
     def state(self) -> dict:
