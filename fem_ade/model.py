@@ -138,16 +138,26 @@ class Params:
         return self.M1 * (V - self.alpha) ** 2
 
     def volume_slope(self, V: float) -> float:
-        """dT₁/dV = 2M₁(V − α); its second derivative, the rank-one Hessian's σ, is 2M₁."""
+        """dT₁/dV = 2M₁(V − α)."""
         return 2.0 * self.M1 * (V - self.alpha)
+
+    @property
+    def volume_curvature(self) -> float:
+        """d²T₁/dV² = 2M₁: the σ of T₁'s rank-one Hessian σ g_V g_Vᵀ (g_V = δV/δφ)."""
+        return 2.0 * self.M1
 
     def area_energy(self, A: float) -> float:
         """T₂ = M₂(A − β)²."""
         return self.M2 * (A - self.beta) ** 2
 
     def area_slope(self, A: float) -> float:
-        """dT₂/dA = 2M₂(A − β); its second derivative is 2M₂."""
+        """dT₂/dA = 2M₂(A − β)."""
         return 2.0 * self.M2 * (A - self.beta)
+
+    @property
+    def area_curvature(self) -> float:
+        """d²T₂/dA² = 2M₂: the σ of T₂'s rank-one Hessian σ g_A g_Aᵀ."""
+        return 2.0 * self.M2
 
     def area_force_scale(self, A: float) -> float:
         """c_A = (3√2/2)M₂(A − β): the area penalty's force is δT₂/δφ = −c_A f (SPEC §3)."""

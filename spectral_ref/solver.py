@@ -104,11 +104,12 @@ def stabilization_symbol(k2, p, s0, s2, dim):
     """The diagonal part S of the large-step scheme, added as S(φⁿ⁺¹ − φⁿ) (SPEC §10).
 
     S = s₀ + s₂|k|² (:func:`fem_ade.model.stabilization_coefficients`) + σ_V δ_k0, where
-    σ_V = M₁|Ω|/2 is the volume penalty's rank-one Hessian, which acts on the mean only.
+    σ_V = 2M₁·(½)²|Ω| = M₁|Ω|/2 is the volume penalty's rank-one Hessian (g_V = ½), which acts
+    on the mean only.
     """
     S = s0 + s2 * k2
     if p.on("volume"):
-        S[(0,) * dim] += 0.5 * p.M1 * p.L**dim
+        S[(0,) * dim] += 0.25 * p.volume_curvature * p.L**dim  # σ_V ⟨½, ½⟩ |Ω|
     return S
 
 
@@ -253,9 +254,9 @@ class SpectralBackend(BackendBase):
         self.stab = ratchet_stabilization(self.stab, stabilization_coefficients(p, A, dA))
         d = self.symbol + stabilization_symbol(self.k2, p, *self.stab, self.dim)
         low_rank = []
-        if A is not None and p.M2 > 0:
-            low_rank.append((2.0 * p.M2, self._fwd(area_gradient(phi, lap, p))))
-        if dA is not None and p.kappa_bar > 0:
+        if A is not None and p.area_curvature > 0:
+            low_rank.append((p.area_curvature, self._fwd(area_gradient(phi, lap, p))))
+        if dA is not None and p.ade_modulus > 0:
             Pg, Qg = area_difference_gradient(phi, lap, p.eps, -0.75 * p.D)
             low_rank.append((p.ade_modulus, self._fwd(Pg) - self.k2 * self._fwd(Qg)))
         if not low_rank:

@@ -11,6 +11,7 @@ import pytest
 
 from fem_ade.output import read_history
 
+
 def _same_run(a, b):
     """Bit for bit: every history column but wall-clock timings (``*_s``), and the field."""
     ha, hb = read_history(a / "history.csv"), read_history(b / "history.csv")

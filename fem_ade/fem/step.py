@@ -172,11 +172,11 @@ class MixedStep:
         """[(σ, b)]: the rank-one Hessians of the penalty terms (volume, area, ADE)."""
         p = self.params
         out = []
-        if p.on("volume") and p.M1 > 0:
-            out.append((2.0 * p.M1, forms.volume_gradient(self.w)))
-        if A is not None and p.M2 > 0:
-            out.append((2.0 * p.M2, self.area_gradient(phi, Kphi)))
-        if dA is not None and p.kappa_bar > 0:
+        if p.on("volume") and p.volume_curvature > 0:
+            out.append((p.volume_curvature, forms.volume_gradient(self.w)))
+        if A is not None and p.area_curvature > 0:
+            out.append((p.area_curvature, self.area_gradient(phi, Kphi)))
+        if dA is not None and p.ade_modulus > 0:
             out.append((p.ade_modulus,
                         self.weak(*forms.area_difference_gradient(phi, mu, p.eps, -0.75 * p.D))))
         return out

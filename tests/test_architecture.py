@@ -1,0 +1,66 @@
+"""The architecture's promises (issue 9): a backend-blind loop and run folder, one registry that
+the backends and the CLI agree with, consistent directly built backends, parameters that
+re-derive what they derived."""
+
+import ast
+import inspect
+from pathlib import Path
+
+import pytest
+
+from fem_ade.backend import backend_class
+from fem_ade.model import Params
+from fem_ade.registry import BACKENDS, CONSTRAINTS, SCHEMES
+from fem_ade.run import build_parser
+
+PACKAGE = Path(__file__).resolve().parents[1] / "fem_ade"
+
+
+def _imports(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text())
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            out.add(("." * node.level) + (node.module or ""))
+        elif isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+    return out
+
+
+@pytest.mark.parametrize("module", ["loop.py", "runs.py"])
+def test_loop_and_run_folder_know_no_backend(module):
+    imports = _imports(PACKAGE / module)
+    assert not any(m.startswith((".fem", "fem_ade.fem", "spectral_ref")) for m in imports), imports
+    source = (PACKAGE / module).read_text()
+    for option in {o.name for spec in BACKENDS.values() for o in spec.options}:
+        assert f'"{option}"' not in source, f"{module} reads the backend option {option!r}"
+
+
+@pytest.mark.parametrize("name", list(BACKENDS))
+def test_registry_matches_the_backend_classes(name):
+    cls = backend_class(name)
+    assert cls.name == name
+    accepted = inspect.signature(cls.__init__).parameters
+    for option in BACKENDS[name].options:
+        assert option.name in accepted, f"{name} does not take its option {option.name!r}"
+        assert accepted[option.name].default == option.default
+
+
+def test_cli_choices_come_from_the_registry():
+    actions = {a.dest: a for a in build_parser()._actions}
+    assert tuple(actions["backend"].choices) == tuple(BACKENDS)
+    assert tuple(actions["scheme"].choices) == tuple(SCHEMES)
+    assert tuple(actions["constraints"].choices) == tuple(CONSTRAINTS)
+    for spec in BACKENDS.values():
+        for o in spec.options:
+            assert actions[o.name].choices == o.choices
+
+
+def test_params_rederive_what_they_derived():
+    p = Params(eps=0.04, alpha=0.03, beta=0.5)
+    q = p.with_(eps=0.02, beta=0.4)
+    assert q.D == pytest.approx(2 * 0.02 / 3) and q.A0 == 0.4
+    r = Params(eps=0.04, alpha=0.03, beta=0.5, D=0.01, A0=0.7).with_(eps=0.02, beta=0.4)
+    assert r.D == 0.01 and r.A0 == 0.7  # given, not derived: kept
+    assert p.for_constraints("exact").effects == p.effects - {"volume", "area"}
+    assert p.for_constraints("penalty") is p
