@@ -128,7 +128,7 @@ class BackendBase:
             self.ramp = TargetRamp.from_state(state["ramp"])
         else:
             end = (self.params.alpha, self.params.beta)
-            self.ramp = TargetRamp(end, end, 1, k=1)
+            self.ramp = TargetRamp(end, end, 1.0, 1.0, fraction=1.0)
 
     @classmethod
     def check(cls, scene: Scene, *, n: int, dt: float, scheme: str = "paper",

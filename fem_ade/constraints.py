@@ -30,6 +30,10 @@ from dataclasses import dataclass
 import numpy as np
 
 DEFAULT_TOL = 1e-10
+class ConstraintError(ArithmeticError):
+    """The multipliers did not converge (the step is too far from V = α, A = β)."""
+
+
 #: the largest relative change of a target per step while the targets ramp from the initial
 #: state's V₀, A₀ to α, β (measured: every paper scene's ramp converges at 1e-2 per step)
 RAMP_RATE = 1e-2
@@ -37,46 +41,83 @@ RAMP_RATE = 1e-2
 
 @dataclass
 class TargetRamp:
-    """Targets (V, A) moving linearly from ``start`` to ``end`` over ``steps`` steps; ``k`` is
-    the number of steps taken (part of a backend's state, so a resumed run ramps the same)."""
+    """Targets (V, A) moving in a straight line from ``start`` to ``end``.
+
+    Each step asks for ``fraction + increment`` of the way (:meth:`propose`). If the step's
+    multipliers cannot reach that (:meth:`slow_down`: the step is tried again with a quarter
+    of the increment) the ramp slows; after each step that reaches it (:meth:`accept`) the
+    increment grows by half again, up to ``max_increment`` (the :data:`RAMP_RATE` relative
+    change per step). So a small Δt, where one step cannot move V or A far, ramps slowly
+    instead of failing. Part of a backend's state: a resumed run ramps the same.
+    """
 
     start: tuple[float, float]
     end: tuple[float, float]
-    steps: int
-    k: int = 0
+    max_increment: float
+    increment: float
+    fraction: float = 0.0
+    moved: bool = False  # the last accepted step moved the targets
 
     @classmethod
     def between(cls, start, end, rate: float = RAMP_RATE) -> TargetRamp:
         gap = max(abs(e / s - 1.0) for s, e in zip(start, end, strict=True))
-        return cls(tuple(map(float, start)), tuple(map(float, end)),
-                   max(1, math.ceil(gap / rate)))
+        inc = 1.0 if gap <= rate else float(rate / gap)
+        return cls(tuple(map(float, start)), tuple(map(float, end)), inc, inc)
 
-    def advance(self) -> tuple[float, float]:
-        """The targets of the next step (and count it)."""
-        self.k += 1
-        f = self.fraction
+    def _at(self, f: float) -> tuple[float, float]:
+        if f >= 1.0:
+            return self.end
         return tuple(s + f * (e - s) for s, e in zip(self.start, self.end, strict=True))
 
-    @property
-    def fraction(self) -> float:
-        return min(1.0, self.k / self.steps)
+    def propose(self) -> tuple[float, float]:
+        """The targets of the next step."""
+        return self._at(min(1.0, self.fraction + self.increment))
+
+    def accept(self) -> None:
+        """The step reached the proposed targets: move on, and speed up again."""
+        new = min(1.0, self.fraction + self.increment)
+        self.moved = new > self.fraction
+        self.fraction = new
+        self.increment = min(self.max_increment, 1.5 * self.increment)
+
+    def slow_down(self) -> bool:
+        """The step could not reach the proposed targets: a quarter of the increment (False
+        when the targets stand still already or the increment is negligible)."""
+        if self.fraction >= 1.0 or self.increment < 1e-6:
+            return False
+        self.increment *= 0.25
+        return True
 
     @property
     def moving(self) -> bool:
-        """True if the last step moved the targets."""
-        return 1 <= self.k <= self.steps
+        """True if the last step moved the targets (E_M may have risen on it)."""
+        return self.moved
+
+    @property
+    def done(self) -> bool:
+        return self.fraction >= 1.0
 
     def state(self) -> np.ndarray:
-        return np.array([*self.start, *self.end, self.steps, self.k], dtype=float)
+        return np.array([*self.start, *self.end, self.max_increment, self.increment,
+                         self.fraction, float(self.moved)], dtype=float)
 
     @classmethod
     def from_state(cls, a) -> TargetRamp:
         a = np.asarray(a, dtype=float).ravel()
-        return cls((a[0], a[1]), (a[2], a[3]), int(a[4]), int(a[5]))
+        return cls((a[0], a[1]), (a[2], a[3]), a[4], a[5], a[6], bool(a[7]))
 
-
-class ConstraintError(ArithmeticError):
-    """The multipliers did not converge (the step is too far from V = α, A = β)."""
+    def solve(self, multipliers):
+        """Run ``multipliers(targets) -> result`` at this step's targets, slowing the ramp and
+        trying again while it fails; return its result (ConstraintError if it never works)."""
+        while True:
+            try:
+                result = multipliers(self.propose())
+            except ConstraintError:
+                if not self.slow_down():
+                    raise
+                continue
+            self.accept()
+            return result
 
 
 def solve_multipliers(measure, alpha: float, beta: float, *, tol: float = DEFAULT_TOL,

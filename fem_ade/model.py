@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
 
-from .registry import CONSTRAINTS
+from .registry import CONSTRAINTS, VOLUMES
 
 #: The energy terms a scene can switch on (SPEC §2). ``bending`` is always on.
 EFFECTS = ("bending", "spontaneous_curvature", "ade", "volume", "area")
@@ -32,6 +32,10 @@ class Params:
 
     ``D`` defaults to 2ε/3 and ``A0`` (the area scale of G) to β. A term is evaluated only
     when its effect is in ``effects``; ``C`` is used only with ``spontaneous_curvature``.
+    ``volume_functional``: the V that the penalty or constraint holds at α
+    (:data:`fem_ade.registry.VOLUMES`): "paper", V = ∫(φ + 1)/2, or "localized",
+    V = ∫ s(φ) with s = (2 + 3φ − φ³)/4, whose gradient s′(φ) = (3/4)(1 − φ²) vanishes in
+    the bulk phases.
     """
 
     eps: float
@@ -49,6 +53,7 @@ class Params:
     effects: frozenset[str] = field(
         default_factory=lambda: frozenset({"bending", "ade", "volume", "area"})
     )
+    volume_functional: str = "paper"
 
     def __post_init__(self):
         object.__setattr__(self, "effects", frozenset(self.effects))
@@ -65,6 +70,11 @@ class Params:
         return effect in self.effects
 
     @property
+    def localized_volume(self) -> bool:
+        """True when V = ∫ s(φ) (bulk-insensitive), False for the paper's ∫(φ + 1)/2."""
+        return self.volume_functional == "localized"
+
+    @property
     def C_eff(self) -> float:
         """C as the bending term sees it: 0 unless ``spontaneous_curvature`` is on."""
         return self.C if "spontaneous_curvature" in self.effects else 0.0
@@ -79,6 +89,9 @@ class Params:
             )
         if "bending" not in self.effects:
             raise ModelError("the 'bending' effect is always on for a vesicle; add it to effects")
+        if self.volume_functional not in VOLUMES:
+            raise ModelError(f"unknown volume functional {self.volume_functional!r}; valid: "
+                             f"{', '.join(VOLUMES)}")
         for name in ("eps", "kappa", "L"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -256,7 +269,8 @@ def explicit_area_dt_bound(params: Params, A: float) -> tuple[float, float]:
     return c, bound
 
 
-def stabilization_coefficients(params: Params, A: float | None, dA: float | None):
+def stabilization_coefficients(params: Params, A: float | None, dA: float | None,
+                               V: float | None = None):
     """(s₀, s₂) of the large-step scheme: it adds (s₀ − s₂Δ)(φⁿ⁺¹ − φⁿ) to the left side.
 
     Each explicit term contributes the Lipschitz bound of its linearisation for |φ| ≤ 1:
@@ -266,10 +280,13 @@ def stabilization_coefficients(params: Params, A: float | None, dA: float | None
       s₀ = 8κ/ε³ (measured: 4κ/ε³ let E_M rise in ``discocyte`` at 100× Δt after 480 steps);
     * area penalty (3√2/2)M₂(A − β)f: reaction |c_A|·2/ε, diffusion |c_A|ε, c_A = (3√2/2)M₂(A − β);
     * ADE h = c_G(−2φΔφ − Δ(φ²) + (1 − 6φ² + 5φ⁴)/ε²): reaction 8|c_G|/ε², diffusion 4|c_G|,
-      c_G = (3κ̄π/(4A₀D))(ΔA − ΔA₀).
+      c_G = (3κ̄π/(4A₀D))(ΔA − ΔA₀);
+    * the localized volume penalty 2M₁(V − α)s′(φ): reaction |2M₁(V − α)|·max|s″| =
+      (3/2)|2M₁(V − α)| (the paper's V has s″ = 0).
 
-    ``A`` (``dA``) is None when the area (ADE) effect is off. The rank-one parts of the penalty
-    Hessians (volume, area, ADE) are made implicit separately by each backend.
+    ``A`` (``dA``, ``V``) is None when the area (ADE, localized volume) effect is off. The
+    rank-one parts of the penalty Hessians (volume, area, ADE) are made implicit separately by
+    each backend.
     """
     p = params
     s0 = 8.0 * p.kappa / p.eps**3
@@ -282,6 +299,8 @@ def stabilization_coefficients(params: Params, A: float | None, dA: float | None
         cG = abs(p.ade_force_coefficient(dA))
         s0 += 8.0 * cG / p.eps**2
         s2 += 4.0 * cG
+    if V is not None and p.localized_volume:
+        s0 += 1.5 * abs(p.volume_slope(V))
     return s0, s2
 
 

@@ -21,6 +21,14 @@ CONSTRAINTS = {
     "exact": "V = alpha and A = beta at every step, by Lagrange multipliers inside the step",
 }
 
+#: the volume functional V that the volume penalty or constraint holds at α
+VOLUMES = {
+    "paper": "V = integral of (phi + 1)/2 over the box (the paper's; a far field below -1 "
+             "carries part of it)",
+    "localized": "V = integral of s(phi), s = (2 + 3 phi - phi^3)/4: s(-1) = 0, s(1) = 1, "
+                 "s'(+-1) = 0, so the bulk carries none of it",
+}
+
 #: preconditioners of the FEM step solve (fem_ade.fem.solve)
 FEM_SOLVERS = ("amg", "chebyshev", "jacobi", "fft", "auto")
 

@@ -266,6 +266,8 @@ def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = 
             if not (isinstance(value, list) and all(isinstance(v, str) for v in value)):
                 raise ModelError(f"params.effects must be a list of names from {EFFECTS}")
             param_kw[key] = frozenset(value)
+        elif key == "volume_functional":
+            param_kw[key] = _typed("params", key, value, str)
         else:
             param_kw[key] = _typed("params", key, value, float)
 

@@ -62,9 +62,18 @@ def bending_force_explicit(phi, lap, p):
     return kappa * P, kappa * Q
 
 
-def volume(phi, dV):
-    """V = ∫ (φ + 1)/2; its gradient δV/δφ = ½ is a constant (the k = 0 mode)."""
+def volume(phi, dV, p):
+    """V = ∫ (φ + 1)/2 (the paper's), or ∫ s(φ), s = (2 + 3φ − φ³)/4 (``localized``)."""
+    if p.localized_volume:
+        return dV * np.sum(2.0 + 3.0 * phi - phi * phi * phi) / 4.0
     return dV * np.sum(phi + 1.0) / 2.0
+
+
+def volume_gradient(phi, p):
+    """δV/δφ: ½ (a constant, the k = 0 mode), or s′(φ) = (3/4)(1 − φ²) (``localized``)."""
+    if p.localized_volume:
+        return 0.75 * (1.0 - phi * phi)
+    return 0.5
 
 
 def area(phi, lap, p, dV):
@@ -104,11 +113,11 @@ def stabilization_symbol(k2, p, s0, s2, dim):
     """The diagonal part S of the large-step scheme, added as S(φⁿ⁺¹ − φⁿ) (SPEC §10).
 
     S = s₀ + s₂|k|² (:func:`fem_ade.model.stabilization_coefficients`) + σ_V δ_k0, where
-    σ_V = 2M₁·(½)²|Ω| = M₁|Ω|/2 is the volume penalty's rank-one Hessian (g_V = ½), which acts
-    on the mean only.
+    σ_V = 2M₁·(½)²|Ω| = M₁|Ω|/2 is the paper's volume penalty's rank-one Hessian (g_V = ½),
+    which acts on the mean only (the localized one's is a rank-one term of the step solver).
     """
     S = s0 + s2 * k2
-    if p.on("volume"):
+    if p.on("volume") and not p.localized_volume:
         S[(0,) * dim] += 0.25 * p.volume_curvature * p.L**dim  # σ_V ⟨½, ½⟩ |Ω|
     return S
 
@@ -191,13 +200,16 @@ class SpectralBackend(BackendBase):
         A = area(phi, lap, p, dV) if p.on("area") else None
         if A is not None:
             P = P + p.area_slope(A) * area_gradient(phi, lap, p)
+        V = volume(phi, dV, p) if p.on("volume") else None
+        if V is not None and p.localized_volume:
+            P = P + p.volume_slope(V) * volume_gradient(phi, p)
         R_hat = self._fwd(P) - self.k2 * self._fwd(Q)
-        if p.on("volume"):  # slope × δV/δφ = slope × ½, a constant: only the k = 0 mode
-            R_hat[(0,) * self.dim] += 0.5 * p.volume_slope(volume(phi, dV)) * self.n**self.dim
+        if V is not None and not p.localized_volume:  # slope × ½, a constant: the k = 0 mode
+            R_hat[(0,) * self.dim] += 0.5 * p.volume_slope(V) * self.n**self.dim
         if self.scheme == "paper" and not self.exact:
             self._set_hat((self.phi_hat / self.dt - R_hat) / self.symbol)
             return {}
-        solve = self._step_solver(A, dA)
+        solve = self._step_solver(A, dA, V)
         delta = solve(-R_hat - (self.symbol - 1.0 / self.dt) * self.phi_hat)
         if not self.exact:
             self._set_hat(self.phi_hat + delta)
@@ -209,13 +221,16 @@ class SpectralBackend(BackendBase):
         """φⁿ⁺¹ = base − λ_V P⁻¹g_V − λ_A P⁻¹g_A with V, A at this step's targets (α, β once
         the ramp is done; fem_ade.constraints)."""
         p, dV, phi, lap = self.params, self.dV, self.phi, self.lap
-        gV_hat = np.zeros_like(base_hat)
-        gV_hat[(0,) * self.dim] = 0.5 * self.n**self.dim  # the transform of the constant ½
+        if p.localized_volume:
+            gV_hat = self._fwd(volume_gradient(phi, p))
+        else:
+            gV_hat = np.zeros_like(base_hat)
+            gV_hat[(0,) * self.dim] = 0.5 * self.n**self.dim  # the transform of the constant ½
         gA_hat = self._fwd(area_gradient(phi, lap, p))
         zs_hat = [solve(gV_hat), solve(gA_hat)]
         base, lap_base = self._inv(base_hat), self._inv(-self.k2 * base_hat)
         zs = [(self._inv(z), self._inv(-self.k2 * z)) for z in zs_hat]
-        JV = [0.5 * dV * float(np.sum(z)) for z, _ in zs]  # ⟨½, z⟩
+        JV = [0.5 * dV * float(np.sum(z)) for z, _ in zs]  # ⟨½, z⟩ (the paper's V)
 
         def fields(a, b):
             return (base + a * zs[0][0] + b * zs[1][0], lap_base + a * zs[0][1] + b * zs[1][1])
@@ -223,10 +238,11 @@ class SpectralBackend(BackendBase):
         def measure(a, b):
             u, lu = fields(a, b)
             gA = area_gradient(u, lu, p)
-            J = [JV, [dV * float(np.sum(gA * z)) for z, _ in zs]]
-            return volume(u, dV), area(u, lu, p, dV), np.array(J)
+            rows = [[dV * float(np.sum(volume_gradient(u, p) * z)) for z, _ in zs]
+                    if p.localized_volume else JV, [dV * float(np.sum(gA * z)) for z, _ in zs]]
+            return volume(u, dV, p), area(u, lu, p, dV), np.array(rows)
 
-        a, b, _ = solve_multipliers(measure, *self.ramp.advance())
+        a, b, _ = self.ramp.solve(lambda targets: solve_multipliers(measure, *targets))
         # φ from φ̂ (not the sums the Newton solve used): the state is φ̂ alone, so that a
         # resumed run is bit for bit the uninterrupted one
         self._set_hat(base_hat + a * zs_hat[0] + b * zs_hat[1])
@@ -240,20 +256,23 @@ class SpectralBackend(BackendBase):
             w[-1] = 1.0
         return self.dV / self.n**self.dim * float(np.sum(w * (np.conj(a_hat) * b_hat).real))
 
-    def _step_solver(self, A, dA):
+    def _step_solver(self, A, dA, V=None):
         """P⁻¹ of this step: δ = φⁿ⁺¹ − φⁿ solves P δ = −Rⁿ − 𝓛φⁿ, 𝓛 = κ(εΔ² + (2/ε)Δ).
 
         The paper's scheme: P = 1/Δt + 𝓛 (diagonal). The large-step scheme (SPEC §10 recipe,
         made concrete): P = 1/Δt + 𝓛 + S + Σᵢ σᵢ gᵢ⟨gᵢ, ·⟩, S the diagonal of
         :func:`stabilization_symbol`, the rank-one terms the Hessians of the penalties: area
-        σ = 2M₂ with g = δA/δφ, ADE σ = κ̄π/(A₀D²) with g = δΔA/δφ, applied by Woodbury.
+        σ = 2M₂ with g = δA/δφ, ADE σ = κ̄π/(A₀D²) with g = δΔA/δφ, the localized volume
+        σ = 2M₁ with g = s′(φ), applied by Woodbury.
         """
         if self.scheme == "paper":
             return lambda rhs: rhs / self.symbol
         p, phi, lap = self.params, self.phi, self.lap
-        self.stab = ratchet_stabilization(self.stab, stabilization_coefficients(p, A, dA))
+        self.stab = ratchet_stabilization(self.stab, stabilization_coefficients(p, A, dA, V))
         d = self.symbol + stabilization_symbol(self.k2, p, *self.stab, self.dim)
         low_rank = []
+        if V is not None and p.localized_volume and p.volume_curvature > 0:
+            low_rank.append((p.volume_curvature, self._fwd(volume_gradient(phi, p))))
         if A is not None and p.area_curvature > 0:
             low_rank.append((p.area_curvature, self._fwd(area_gradient(phi, lap, p))))
         if dA is not None and p.ade_modulus > 0:
@@ -277,7 +296,7 @@ class SpectralBackend(BackendBase):
     def diagnostics(self) -> dict:
         p, phi, lap, dV = self.params, self.phi, self.lap, self.dV
         dA = area_difference(phi, lap, p, dV) if p.on("ade") else None
-        return p.energy(bending_energy(phi, lap, p, dV), volume(phi, dV),
+        return p.energy(bending_energy(phi, lap, p, dV), volume(phi, dV, p),
                         area(phi, lap, p, dV), dA)
 
     def state(self) -> dict:

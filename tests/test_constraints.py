@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fem_ade.backend import make_backend
-from fem_ade.constraints import TargetRamp
+from fem_ade.constraints import ConstraintError, TargetRamp
 from fem_ade.loop import run_loop
 from fem_ade.output import read_history
 from fem_ade.scenes import PAPER_SCENES, get_scene
@@ -17,16 +17,30 @@ ALPHA, BETA = 0.0289, 0.4880  # discocyte
 
 def test_target_ramp():
     r = TargetRamp.between((1.0, 2.0), (1.05, 1.0), rate=0.01)
-    assert r.steps == 50  # |1/2 - 1| / 0.01
-    first = r.advance()
-    assert first == pytest.approx((1.001, 1.98)) and r.moving
-    for _ in range(49):
-        last = r.advance()
-    assert last == (1.05, 1.0) and r.fraction == 1.0 and r.moving
-    r.advance()
+    assert r.max_increment == pytest.approx(1 / 50)  # |1/2 - 1| / 0.01 = 50 steps
+    assert r.propose() == pytest.approx((1.001, 1.98))
+    r.accept()
+    assert r.moving and r.fraction == pytest.approx(0.02)
+    assert r.slow_down() and r.propose() == pytest.approx(r._at(0.02 + 0.005))
+    calls = []
+
+    def fails_twice(targets):
+        calls.append(targets)
+        if len(calls) <= 2:
+            raise ConstraintError("too far")
+        return targets
+
+    got = r.solve(fails_twice)
+    assert got == calls[-1] and r.increment == pytest.approx(1.5 * 0.005 / 16)
+    steps = 0
+    while not r.done:
+        r.solve(lambda t: t)
+        steps += 1
+    assert r.propose() == (1.05, 1.0) and r.moving and steps < 60
+    r.solve(lambda t: t)
     assert not r.moving  # the targets stood still on this step
-    again = TargetRamp.from_state(r.state())
-    assert again == r
+    assert TargetRamp.from_state(r.state()) == r
+    assert not r.slow_down()
 
 
 @pytest.mark.parametrize("scheme, dt, steps",
@@ -55,10 +69,13 @@ def _start_under_exact(backend, name, n):
     scene = PAPER_SCENES[name]
     dt = 100 * scene.dt
     be = make_backend(backend, scene, n=n, scheme="stabilized", constraints="exact", dt=dt)
-    ramp = be.ramp.steps
-    res = run_loop(be, dt=dt, steps=ramp + 10, every=5)
+    ramp = 0
+    while not be.ramp.done:
+        be.step()
+        ramp += 1
+    res = run_loop(be, dt=dt, steps=10, every=1)
     p = scene.params
-    E = np.array([row["E"] for row in res.history if row["step"] >= ramp])
+    E = np.array([row["E"] for row in res.history])
     dv, da = abs(res.final["V"] / p.alpha - 1), abs(res.final["A"] / p.beta - 1)
     print(f"{name} [{backend}]: ramp {ramp} steps, then |V/alpha - 1| = {dv:.1e}, "
           f"|A/beta - 1| = {da:.1e}")

@@ -47,8 +47,10 @@ def laplace(u, v, w):
 # ---------------------------------------------------------------------------------------------
 # the functionals of SPEC §2
 # ---------------------------------------------------------------------------------------------
-def volume(phi, weights) -> float:
-    """V = ∫ (φ + 1)/2."""
+def volume(phi, weights, localized=False) -> float:
+    """V = ∫ (φ + 1)/2 (the paper's), or ∫ s(φ), s = (2 + 3φ − φ³)/4 (``localized``)."""
+    if localized:
+        return 0.25 * _dot(weights, 2.0 + 3.0 * phi - phi * phi * phi)
     return 0.5 * _dot(weights, phi + 1.0)
 
 
@@ -76,9 +78,11 @@ def bending(phi, mu, weights, kappa, eps, C) -> float:
 # ---------------------------------------------------------------------------------------------
 # gradients: (a, c) with ⟨δQ/δφ, v⟩ = K a + M_t c
 # ---------------------------------------------------------------------------------------------
-def volume_gradient(weights):
-    """⟨δV/δφ, v⟩ = ½(1, v): the vector ½ M_L·1 (nodal quadrature of the constant ½)."""
-    return 0.5 * weights
+def volume_gradient(phi, localized=False):
+    """c with ⟨δV/δφ, v⟩ = M_t c: the constant ½, or s′(φ) = (3/4)(1 − φ²) (``localized``)."""
+    if localized:
+        return 0.75 * (1.0 - phi * phi)
+    return 0.5
 
 
 def area_gradient(phi, eps, coef=AREA_FACTOR):

@@ -111,18 +111,25 @@ class MixedStep:
 
     # -- functionals ------------------------------------------------------------------------
     def values(self, phi, mu, Kphi):
-        """(A, ΔA) at φ, None where the effect (area, ade) is off."""
+        """(A, ΔA, V) at φ, None where the effect (area, ade, volume) is off."""
         p = self.params
         A = forms.area(phi, Kphi, self.w, p.eps) if p.on("area") else None
         dA = (forms.area_difference(phi, Kphi, self.w, p.D, p.eps) if p.on("ade") else None)
-        return A, dA
+        V = forms.volume(phi, self.w, p.localized_volume) if p.on("volume") else None
+        return A, dA, V
 
     def diagnostics(self, phi, mu, Kphi) -> dict:
         """E, W, G, V, A, ΔA (and T1, T2) of SPEC §6 (off terms report 0)."""
         p, w = self.params, self.w
         dA = forms.area_difference(phi, Kphi, w, p.D, p.eps) if p.on("ade") else None
         return p.energy(forms.bending(phi, mu, w, p.kappa, p.eps, p.C_eff),
-                        forms.volume(phi, w), forms.area(phi, Kphi, w, p.eps), dA)
+                        forms.volume(phi, w, p.localized_volume),
+                        forms.area(phi, Kphi, w, p.eps), dA)
+
+    def volume_gradient(self, u) -> np.ndarray:
+        """⟨δV/δφ, v⟩ at u: ½M_t·1, or M_t s′(u) for the localized V."""
+        c = forms.volume_gradient(u, self.params.localized_volume)
+        return self.Mt @ (c * np.ones_like(u))
 
     def area_gradient(self, u, Ku) -> np.ndarray:
         """⟨δA/δφ, v⟩ at u (with M_t = M_L the exact gradient of the discrete A)."""
@@ -131,11 +138,12 @@ class MixedStep:
 
     # -- the explicit side ------------------------------------------------------------------
     def explicit_rhs(self, phi, mu, Kphi):
-        """(⟨Rⁿ, v⟩ as a DOF vector, (A, ΔA)) (SPEC §4–§5); only the terms whose effect is on."""
+        """(⟨Rⁿ, v⟩ as a DOF vector, (A, ΔA, V)) (SPEC §4–§5); only the terms whose effect is
+        on."""
         p = self.params
-        A, dA = self.values(phi, mu, Kphi)
+        A, dA, V = self.values(phi, mu, Kphi)
         if self.products == "quadrature":
-            return self._explicit_rhs_quadrature(phi, mu, A, dA), (A, dA)
+            return self._explicit_rhs_quadrature(phi, mu, A, dA, V), (A, dA, V)
         a, c = forms.bending_explicit(phi, mu, kappa=p.kappa, eps=p.eps, C=p.C_eff)
         if dA is not None:
             a2, c2 = forms.area_difference_gradient(phi, mu, p.eps, p.ade_force_coefficient(dA))
@@ -145,11 +153,11 @@ class MixedStep:
             s, c2 = forms.area_gradient(phi, p.eps, p.area_force_scale(A))
             a += s * phi
             c += c2
-        if p.on("volume"):  # slope × ⟨δV/δφ, v⟩ = slope × ½ M_t·1
-            c += 0.5 * p.volume_slope(forms.volume(phi, self.w))
-        return self.weak(a, c), (A, dA)
+        if V is not None:  # slope × ⟨δV/δφ, v⟩ = slope × M_t(½ or s′(φ))
+            c += p.volume_slope(V) * forms.volume_gradient(phi, p.localized_volume)
+        return self.weak(a, c), (A, dA, V)
 
-    def _explicit_rhs_quadrature(self, phi, mu, A, dA) -> np.ndarray:
+    def _explicit_rhs_quadrature(self, phi, mu, A, dA, V) -> np.ndarray:
         p, basis = self.params, self.basis
         fields = {"phi": basis.interpolate(phi), "mu": basis.interpolate(mu), "eps": p.eps}
         r = forms.bending_explicit_form.assemble(basis, kappa=p.kappa, C=p.C_eff, **fields)
@@ -158,8 +166,9 @@ class MixedStep:
                 basis, coef=p.ade_force_coefficient(dA), **fields)
         if A is not None:
             r += forms.area_gradient_form.assemble(basis, coef=p.area_force_scale(A), **fields)
-        if p.on("volume"):
-            r += 0.5 * p.volume_slope(forms.volume(phi, self.w)) * self.w
+        if V is not None:
+            r += p.volume_slope(V) * (self.Mt @ (forms.volume_gradient(phi, p.localized_volume)
+                                                 * np.ones_like(phi)))
         return r
 
     def descent(self, Kphi, mu, rhs) -> np.ndarray:
@@ -168,12 +177,12 @@ class MixedStep:
         p = self.params
         return (2.0 * p.kappa / p.eps) * Kphi - p.kappa * p.eps * (self.K @ mu) - rhs
 
-    def rank_one(self, phi, mu, Kphi, A, dA):
+    def rank_one(self, phi, mu, Kphi, A, dA, V):
         """[(σ, b)]: the rank-one Hessians of the penalty terms (volume, area, ADE)."""
         p = self.params
         out = []
-        if p.on("volume") and p.volume_curvature > 0:
-            out.append((p.volume_curvature, forms.volume_gradient(self.w)))
+        if V is not None and p.volume_curvature > 0:
+            out.append((p.volume_curvature, self.volume_gradient(phi)))
         if A is not None and p.area_curvature > 0:
             out.append((p.area_curvature, self.area_gradient(phi, Kphi)))
         if dA is not None and p.ade_modulus > 0:
@@ -187,7 +196,7 @@ class MixedStep:
 
         ``krylov_its`` and ``solve_s`` count all the step's PCG solves (three when exact).
         """
-        rhs, (A, dA) = self.explicit_rhs(phi, mu, Kphi)
+        rhs, (A, dA, V) = self.explicit_rhs(phi, mu, Kphi)
         g = self.descent(Kphi, mu, rhs)
         if self.scheme == "paper" and not self.exact:
             b = self.Mt @ (phi / self.dt) - rhs
@@ -198,9 +207,9 @@ class MixedStep:
         low_rank = ()
         if self.scheme == "stabilized":
             self.stab = ratchet_stabilization(self.stab,
-                                              stabilization_coefficients(self.params, A, dA))
+                                              stabilization_coefficients(self.params, A, dA, V))
             self.solver = self.solver_for(self.dt, self.stab)
-            low_rank = self.rank_one(phi, mu, Kphi, A, dA)
+            low_rank = self.rank_one(phi, mu, Kphi, A, dA, V)
         x0 = np.zeros_like(phi) if phi_prev is None else phi - phi_prev
         t0 = time.perf_counter()
         delta, its = self.solver.solve(g, x0, ref=np.zeros_like(g), scale=_norm(g),
@@ -216,7 +225,7 @@ class MixedStep:
         """φⁿ⁺¹ = base + a z_V + b z_A with V, A at this step's targets (α, β once the ramp is
         done): (φⁿ⁺¹, λ_V, λ_A, PCG its)."""
         p, w = self.params, self.w
-        bs = [forms.volume_gradient(w), self.area_gradient(phi, Kphi)]
+        bs = [self.volume_gradient(phi), self.area_gradient(phi, Kphi)]
         zs, its = [], 0
         for i, b in enumerate(bs):
             x0 = np.zeros_like(b) if self.z is None else self.z[i]
@@ -234,10 +243,11 @@ class MixedStep:
         def measure(a, b):
             u, Ku = fields(a, b)
             gA = self.area_gradient(u, Ku)
-            J = np.array([JV, [_dot(gA, z) for z in zs]])
-            return forms.volume(u, w), forms.area(u, Ku, w, p.eps), J
+            gV = [_dot(self.volume_gradient(u), z) for z in zs] if p.localized_volume else JV
+            J = np.array([gV, [_dot(gA, z) for z in zs]])
+            return forms.volume(u, w, p.localized_volume), forms.area(u, Ku, w, p.eps), J
 
-        a, b, _ = solve_multipliers(measure, *self.ramp.advance())
+        a, b, _ = self.ramp.solve(lambda targets: solve_multipliers(measure, *targets))
         return fields(a, b)[0], -a, -b, its
 
     # -- state ------------------------------------------------------------------------------
