@@ -17,9 +17,9 @@ from pathlib import Path
 from .loop import EXIT_BAD_INPUT
 from .model import ModelError
 from .output import read_json
-from .registry import BACKENDS, CONSTRAINTS, SCHEMES
-from .runs import resume, simulate
-from .scenes import PAPER_SCENES, SCENES, TEACHING_SCENES, resolve_scene
+from .registry import BACKENDS, CONSTRAINTS, SCHEMES, VOLUMES
+from .runs import resume, simulate, verdict
+from .scenes import PAPER_SCENES, SCENES, TEACHING_SCENES, resolve_scene, scene_from_mapping
 
 
 class _Parser(argparse.ArgumentParser):
@@ -59,6 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--constraints", choices=tuple(CONSTRAINTS), default="penalty",
                    help="; ".join(f"{k}: {v}" for k, v in CONSTRAINTS.items())
                    + " (default penalty)")
+    p.add_argument("--volume", choices=tuple(VOLUMES), default=None,
+                   help="the volume functional held at alpha: "
+                   + "; ".join(f"{k}: {v}" for k, v in VOLUMES.items())
+                   + " (default: the scene's, paper)")
     p.add_argument("--adaptive", action="store_true",
                    help="adapt dt: grow while E_M decays, halve on a rejected step")
     p.add_argument("--checkpoint-every", type=int, metavar="K",
@@ -112,14 +116,16 @@ def main(argv: list[str] | None = None) -> int:
         except (ModelError, FileNotFoundError) as err:
             print(f"fem_ade.run: error: {err}", file=sys.stderr)
             return EXIT_BAD_INPUT
-        return _report(summary["scene"]["name"], summary["backend"], result,
-                       summary["scene"]["params"], args.resume)
+        return _report(scene_from_mapping(summary["scene"]), summary["backend"], result,
+                       args.resume)
     if args.scene is None:
         print(f"fem_ade.run: error: give a scene ({', '.join(SCENES)}) or a .toml file",
               file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
         scene = resolve_scene(args.scene)
+        if args.volume is not None:
+            scene = scene.with_(volume_functional=args.volume)
         out = args.out or (Path("runs") / f"{scene.name}-{args.backend}-"
                            f"{time.strftime('%Y%m%d-%H%M%S')}")
         options = backend_options(args)
@@ -136,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
     except ModelError as err:
         print(f"fem_ade.run: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    return _report(scene.name, args.backend, result, scene.params.as_dict(), out)
+    return _report(scene, args.backend, result, out)
 
 
 def backend_options(args) -> dict:
@@ -158,20 +164,23 @@ def _interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
-def _report(name: str, backend: str, result, params: dict, out) -> int:
-    f = result.final
+def _report(scene, backend: str, result, out) -> int:
+    f, p = result.final, scene.params
     stream = sys.stderr if result.exit_code else sys.stdout
-    print(f"{name} [{backend}]: {result.message}", file=stream)
+    print(f"{scene.name} [{backend}]: {result.message}", file=stream)
     print(f"  t = {result.t:.4g}  E = {f['E']:.6g}  W = {f['W']:.6g}  G = {f['G']:.4g}  "
-          f"V/alpha = {f['V'] / params['alpha']:.4f}  A/beta = {f['A'] / params['beta']:.4f}  "
+          f"V/alpha = {f['V'] / p.alpha:.4f}  A/beta = {f['A'] / p.beta:.4f}  "
           f"dA = {f['dA']:.4g}  ({result.wall_s:.1f} s)")
     if result.shape is not None:
         d = result.shape
         genus = ", ".join(map(str, d["genus"])) or "-"
-        print(f"  shape: {d['components']} component(s), genus {genus}"
+        print(f"  shape: {d['label']}: {d['components']} component(s), genus {genus}"
               f"{', nested' if d['nested'] else ''}, arms {d['arms']}, reduced volume "
               f"{d['reduced_volume']:.3f}, reduced area difference "
-              f"{d['reduced_area_difference']:.3f}")
+              f"{d['reduced_area_difference']:.3f} (sharp surface)")
+        v = verdict(scene, d)
+        if v is not None:
+            print(f"  {v['line']}")
     written = sorted(p.name for p in Path(out).iterdir()) if Path(out).is_dir() else []
     print(f"  results in {out}/ ({', '.join(written)})")
     if result.status == "interrupted":

@@ -40,7 +40,24 @@ from .xdmf import XdmfSeries
 
 #: summary.json → shape: the descriptors of the sharp surface kept at its top level
 SHAPE_KEYS = ("components", "genus", "nested", "reduced_volume", "reduced_area_difference",
-              "arms")
+              "arms", "label", "body")
+
+
+def verdict(scene: Scene, shape: dict | None) -> dict | None:
+    """How the run's final shape relates to the paper's (``scene.shape``): both labels, the
+    numbers behind this run's, and ``same``."""
+    if shape is None or not scene.shape:
+        return None
+    body = shape.get("body") or {}
+    numbers = (f"{shape['components']} component{'s' if shape['components'] != 1 else ''}, "
+               f"genus {', '.join(map(str, shape['genus'])) or '-'}, arms {shape['arms']}")
+    if body:
+        numbers += (f", axes ratios {body['elongation']:.2f} / {body['flatness']:.2f}, "
+                    f"{body['necks']} neck(s), dimple {body['dimple']:.2f}")
+    same = shape["label"] == scene.shape
+    line = (f"paper's shape: {scene.shape} ({scene.figure}); this run: {shape['label']} "
+            f"({numbers}) -> {'same' if same else 'different'}")
+    return {"paper": scene.shape, "run": shape["label"], "same": same, "line": line}
 
 
 def simulate(
@@ -283,6 +300,7 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict, series, gri
         "message": result.message,
         "final": result.final,
         "shape": result.shape,
+        "verdict": verdict(be.scene, result.shape),
         "wall_s": result.wall_s,
         "versions": package_versions(),
     }

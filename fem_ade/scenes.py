@@ -42,6 +42,8 @@ class Scene:
     figure: str = ""
     description: str = ""
     steps: int = 200  # default number of steps of the CLI (a short, visible run)
+    #: the paper figure's shape as a label of :func:`fem_ade.shape.classify` ("" if none)
+    shape: str = ""
 
     def initial_phi(
         self,
@@ -106,12 +108,13 @@ PAPER_EFFECTS = frozenset({"bending", "ade", "volume", "area"})
 _C = (0.5, 0.5, 0.5)
 
 
-def _paper(name, figure, eps, dt, alpha, beta, dA0, axes, c_printed, c_consistent, desc, **kw):
+def _paper(name, figure, eps, dt, alpha, beta, dA0, axes, c_printed, c_consistent, desc, shape,
+           **kw):
     n = kw.pop("n", 64)
     centre = kw.pop("centre", _C)
     params = Params(eps=eps, alpha=alpha, beta=beta, delta_A0=dA0, effects=PAPER_EFFECTS, **kw)
     ic = Ellipsoid(centre, axes, c_consistent=c_consistent, c_printed=c_printed)
-    return Scene(name, params, dt, ic, n=n, figure=figure, description=desc)
+    return Scene(name, params, dt, ic, n=n, figure=figure, description=desc, shape=shape)
 
 
 _A3 = (0.2**2, 0.2**2, 0.35**2)
@@ -119,31 +122,31 @@ _S35 = (0.35**2,) * 3
 
 _PAPER = [
     _paper("discocyte", "Fig. 1", 0.04, 5e-7, 0.0289, 0.4880, 0.1090, (0.5, 0.5, 0.1), 0.35,
-           0.35**2, "experiment 1: flattened ellipsoid relaxing to a discocyte"),
+           0.35**2, "experiment 1: flattened ellipsoid relaxing to a discocyte", "discocyte"),
     _paper("torus", "Fig. 2", 0.03, 2e-7, 0.0652, 0.9092, 0.2839, _S35, 0.6, 0.6,
-           "experiment 2: sphere with excess area and area difference forming a torus"),
+           "experiment 2: sphere with excess area and area difference forming a torus", "torus"),
     _paper("biconcave", "Fig. 3a", 0.05, 5e-7, 0.0077, 0.1992, 0.1614, _A3, 0.5, 0.5**2,
-           "experiment 3a: prolate ellipsoid to a biconcave shape"),
+           "experiment 3a: prolate ellipsoid to a biconcave shape", "discocyte"),
     _paper("gourd-early", "Fig. 3b", 0.05, 5e-7, 0.0077, 0.2068, 0.1676, _A3, 0.5, 0.5**2,
-           "experiment 3b: early gourd"),
+           "experiment 3b: early gourd", "gourd"),
     _paper("gourd-elongated", "Fig. 3c", 0.05, 5e-7, 0.0077, 0.2390, 0.1906, _A3, 0.5, 0.5**2,
-           "experiment 3c: elongated gourd"),
+           "experiment 3c: elongated gourd", "gourd"),
     _paper("gourd", "Fig. 3d", 0.05, 5e-7, 0.0077, 0.2390, 0.2253, _A3, 0.5, 0.5**2,
-           "experiment 3d: gourd"),
+           "experiment 3d: gourd", "gourd"),
     _paper("cylinder", "Fig. 3e", 0.05, 5e-7, 0.0077, 0.2390, 0.2426, _A3, 0.5, 0.5**2,
-           "experiment 3e: cylinder"),
+           "experiment 3e: cylinder", "cylinder"),
     _paper("two-spheres", "Fig. 4", 0.02, 2e-7, 0.0074, 0.1969, 0.0711, _A3, 0.5, 0.5**2,
-           "experiment 4: two connected spheres"),
+           "experiment 4: two connected spheres", "gourd"),
     _paper("chain", "Fig. 5", 0.02, 5e-7, 0.0074, 0.2328, 0.0958, _A3, 0.5, 0.5**2,
-           "experiment 5: chain of beads"),
+           "experiment 5: chain of beads", "chain"),
     _paper("three-arm", "Fig. 6", 0.02, 1e-7, 0.0226, 0.4489, 0.1520, _S35, 0.5, 0.5**2,
-           "experiment 6: three-armed starfish"),
+           "experiment 6: three-armed starfish", "starfish-3"),
     _paper("four-arm", "Fig. 7", 0.02, 2e-7, 0.0097, 0.2550, 0.1146, (0.35**2, 0.35**2, 0.15**2),
-           0.5, 0.5**2, "experiment 7: four-armed starfish"),
+           0.5, 0.5**2, "experiment 7: four-armed starfish", "starfish-4"),
     _paper("six-arm", "Fig. 8", 0.02, 1e-7, 0.0529, 0.7911, 0.1766, _S35, 0.6, 0.6,
-           "experiment 8: six-armed starfish"),
+           "experiment 8: six-armed starfish", "starfish-6"),
     _paper("nested", "Fig. 9", 0.03, 5e-7, 0.2693, 2.8347, 0.3939, (0.16, 0.16, 0.16), 1.0, 1.0,
-           "experiment 9: nested vesicle (L = 2)", n=100, centre=(1.0, 1.0, 1.0), L=2.0,
+           "experiment 9: nested vesicle (L = 2)", "nested", n=100, centre=(1.0, 1.0, 1.0), L=2.0,
            M1=1e4, M2=1e4),
 ]
 
@@ -163,7 +166,8 @@ def _sphere(name, effects, desc):
     sv = sphere_values(R, eps, 2.0 * eps / 3.0)
     params = Params(eps=eps, alpha=sv["V"], beta=sv["A"], delta_A0=sv["dA"], effects=effects)
     ic = Sphere(_C, radius=R)
-    return Scene(name, params, 5e-7, ic, n=48, figure="SPEC §8", description=desc)
+    return Scene(name, params, 5e-7, ic, n=48, figure="SPEC §8", description=desc,
+                 shape="sphere")
 
 
 _TEACHING = [
@@ -199,7 +203,7 @@ def get_scene(name: str) -> Scene:
 # Scenes from TOML files
 # ---------------------------------------------------------------------------------------
 _SCENE_KEYS = {"name": str, "figure": str, "description": str, "n": int, "dim": int,
-               "dt": float, "steps": int}
+               "dt": float, "steps": int, "shape": str}
 
 
 def _typed(table: str, key: str, value, kind):
@@ -309,7 +313,7 @@ def scene_to_mapping(scene: Scene) -> dict:
     ic = scene.ic.to_mapping()
     return {"name": scene.name, "figure": scene.figure, "description": scene.description,
             "n": scene.n, "dim": scene.dim, "dt": scene.dt, "steps": scene.steps,
-            "params": params, "ic": ic}
+            "shape": scene.shape, "params": params, "ic": ic}
 
 
 def resolve_scene(name_or_path: str) -> Scene:

@@ -46,6 +46,13 @@ Descriptors
 * ``arms``: the number of lobes of the largest component, see :func:`count_arms`.
   Convention: a body without arms (sphere, ellipsoid, discocyte, torus) has **1** lobe; a
   three-armed starfish 3, a six-armed one 6.
+* ``body``: the geometry of the largest region φ > 0 (:func:`body_geometry`): its principal
+  semi-axes a₁ ≥ a₂ ≥ a₃ (those of the solid ellipsoid with the same second moments),
+  ``elongation`` a₁/a₂ and ``flatness`` a₃/a₂, the ``necks`` along the long axis (minima of
+  the cross-section area below 85 % of the smaller maximum beside them) and the ``dimple``
+  1 − (thickness at the centre)/(largest thickness) across the short axis (> 0: biconcave).
+* ``label``: a name for all of it (:func:`classify`): sphere, prolate, oblate, discocyte,
+  cylinder, gourd, chain, torus, genus-g, starfish-k, nested, k vesicles.
 """
 
 from __future__ import annotations
@@ -491,7 +498,105 @@ def describe(phi: np.ndarray, L: float, *, V: float | None = None, A: float | No
                   "reduced_volume": reduced_volume(V_sharp, A_sharp),
                   "reduced_area_difference": sharp_m},
         "shift": list(S.shift),
-    }
+    } | _with_label(S, nc, genus, inside_of, arms)
+
+
+def _with_label(S, nc, genus, inside_of, arms) -> dict:
+    body = body_geometry(S) if nc else None
+    first = (arms[0] if arms[0] is not None else 0) if nc else 0
+    d = {"components": nc, "genus": genus, "nested": any(k is not None for k in inside_of),
+         "arms": first, "body": body}
+    return {"body": body, "label": classify(d)}
+
+
+#: a neck: a minimum of the cross-section area along the long axis below this fraction of the
+#: smaller of the maxima on either side
+NECK_RATIO = 0.85
+#: biconcave: the centre's thickness is below (1 − this) of the largest thickness
+DIMPLE = 0.08
+#: elongation a₁/a₂ above which a body is prolate, and cylinder when also without necks
+PROLATE, CYLINDER = 1.15, 2.2
+#: flatness a₃/a₂ below which a body is oblate
+OBLATE = 0.85
+
+
+def body_geometry(S: Surface) -> dict | None:
+    """Principal semi-axes, necks and dimple of the largest region {φ > 0} (None if there is
+    none, or it winds around the periodic box). See the module docstring."""
+    region = S.phi > 0
+    labels, count = ndimage.label(region)
+    if count == 0:
+        return None
+    sizes = np.bincount(labels.ravel())[1:]
+    mask = labels == 1 + int(np.argmax(sizes))
+    idx = np.argwhere(mask)
+    if any(idx[:, a].min() == 0 and idx[:, a].max() == S.phi.shape[a] - 1 for a in range(3)):
+        return None  # it spans an axis of the box: no finite body to measure
+    X = S.origin + idx * S.h
+    c = X.mean(axis=0)
+    Y = X - c
+    lam, vec = np.linalg.eigh(Y.T @ Y / len(Y))
+    lam, vec = lam[::-1], vec[:, ::-1]  # a₁ ≥ a₂ ≥ a₃
+    axes = np.sqrt(5.0 * np.maximum(lam, 0.0))
+    h = float(S.h.min())
+    cell = float(np.prod(S.h))
+    # cross-section area along the long axis
+    s1 = Y @ vec[:, 0]
+    bins = np.arange(s1.min() - h, s1.max() + 2 * h, h)
+    area = np.convolve(np.histogram(s1, bins)[0] * cell / h, np.ones(3) / 3, mode="same")
+    necks, worst = 0, 1.0
+    i = 1
+    while i < len(area) - 1:
+        if area[i] <= area[i - 1] and area[i] <= area[i + 1] and area[i] > 0:
+            ratio = area[i] / min(area[:i].max(), area[i + 1:].max())
+            if ratio < NECK_RATIO:
+                necks += 1
+                worst = min(worst, float(ratio))
+                while i < len(area) - 1 and area[i + 1] <= area[i] * (1 + 1e-9) + 1e-300:
+                    i += 1  # one neck per minimum, however flat
+        i += 1
+    # thickness across the short axis along lines parallel to it, as a function of their
+    # distance ρ from the centroid (8 directions, φ by trilinear interpolation)
+    t = np.arange(-axes[0] - 2 * h, axes[0] + 2 * h, 0.5 * h)
+    rhos = np.arange(0.0, axes[0], h)
+    angles = np.linspace(0.0, 2.0 * np.pi, 8, endpoint=False)
+    offsets = (np.cos(angles)[:, None] * vec[:, 0] + np.sin(angles)[:, None] * vec[:, 1])
+    pts = (c + rhos[:, None, None, None] * offsets[None, :, None, :]
+           + t[None, None, :, None] * vec[:, 2])
+    inside = S.phi_at(pts) > 0
+    thickness = inside.sum(axis=2).mean(axis=1) * 0.5 * h
+    dimple = float(1.0 - thickness[0] / thickness.max()) if thickness.max() > 0 else 0.0
+    return {"semi_axes": [float(a) for a in axes],
+            "elongation": float(axes[0] / axes[1]), "flatness": float(axes[2] / axes[1]),
+            "necks": necks, "neck_ratio": worst, "dimple": dimple}
+
+
+def classify(d: dict) -> str:
+    """One name for the descriptors of :func:`describe` (see the module docstring)."""
+    nc = d["components"]
+    if nc == 0:
+        return "no membrane"
+    if d["nested"]:
+        return "nested"
+    if nc > 1:
+        return f"{nc} vesicles"
+    g = d["genus"][0]
+    if g:
+        return "torus" if g == 1 else f"genus-{g}"
+    if d["arms"] >= 3:
+        return f"starfish-{d['arms']}"
+    body = d.get("body")
+    if body is None:
+        return "wrapping"
+    if body["necks"] >= 2:
+        return "chain"
+    if body["necks"] == 1:
+        return "gourd"
+    if body["elongation"] > PROLATE:
+        return "cylinder" if body["elongation"] > CYLINDER else "prolate"
+    if body["flatness"] < OBLATE:
+        return "discocyte" if body["dimple"] > DIMPLE else "oblate"
+    return "sphere"
 
 
 def summary_line(d: dict, given: str = "given V, A, ΔA") -> str:

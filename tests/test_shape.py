@@ -145,3 +145,41 @@ def test_surface_winding_round_the_box():
 def test_no_surface():
     d = describe(-np.ones((16, 16, 16)), L)
     assert d["components"] == 0 and d["genus"] == [] and d["arms"] == 0
+
+
+# --- the body's geometry and the label (issue 10's verdicts) ------------------------------
+def _classified(ic, n=48, eps=0.02):
+    import math
+
+    from fem_ade.shape import describe
+
+    x = np.arange(n) / n
+    s, _ = ic.level(np.stack(np.meshgrid(x, x, x, indexing="ij")), 1.0)
+    return describe(np.tanh(s / (math.sqrt(2) * eps)), 1.0)
+
+
+def _shapes():
+    from fem_ade.initial import Capsule, Discocyte, Ellipsoid, Spheres, Sphere, Starfish, Torus
+
+    c = (0.5, 0.5, 0.5)
+    return {
+        "sphere": Sphere(c, 0.25),
+        "prolate": Ellipsoid(c, (0.1, 0.1, 0.2), 0.25, 0.25),
+        "oblate": Ellipsoid(c, (0.2, 0.2, 0.07), 0.25, 0.25),
+        "discocyte": Discocyte(c, 0.6),
+        "torus": Torus(c, 0.25, 0.1),
+        "gourd": Spheres(((0.5, 0.5, 0.4), (0.5, 0.5, 0.6)), (0.14, 0.14)),
+        "chain": Spheres(((0.5, 0.5, 0.3), (0.5, 0.5, 0.5), (0.5, 0.5, 0.7)), (0.12,) * 3),
+        "cylinder": Capsule(c, (0, 0, 1), 0.5, 0.08),
+        "starfish-3": Starfish(c, 3, 0.35, 0.06, 0.1),
+        "starfish-6": Starfish(c, 6, 0.35, 0.06, 0.1, plane=False),
+        "nested": Spheres((c, c), (0.35, 0.2), (1, -1)),
+        "2 vesicles": Spheres(((0.5, 0.5, 0.25), (0.5, 0.5, 0.75)), (0.12, 0.12)),
+    }
+
+
+@pytest.mark.parametrize("label", list(_shapes()))
+def test_classify_names_each_kind_of_shape(label):
+    d = _classified(_shapes()[label])
+    print(label, "->", d["label"], d["body"])
+    assert d["label"] == label
