@@ -101,6 +101,7 @@ class RunResult:
     dt: float = math.nan
     rejected: int = 0
     shape: dict | None = None
+    shapes: list[dict] = field(default_factory=list)
 
     @property
     def exit_code(self) -> int:
@@ -135,8 +136,7 @@ def run_loop(
     adaptive: AdaptiveDt | None = None,
     checkpoint_every: int | None = None,
     on_checkpoint=None,
-    save_every: int | None = None,
-    on_save=None,
+    observers=(),
     start: LoopState | None = None,
 ) -> RunResult:
     """Advance ``backend`` from ``start`` (default: step 0) and record every ``every`` steps.
@@ -144,7 +144,8 @@ def run_loop(
     ``history``: anything with ``write(row: dict)`` (e.g. :class:`fem_ade.output.HistoryWriter`),
     called with each recorded row as it is made.
     ``on_checkpoint(state: LoopState)`` is called every ``checkpoint_every`` steps and on
-    Ctrl-C, ``on_save(state)`` at the start and every ``save_every`` steps, each with the
+    Ctrl-C; each ``(every, observe)`` of ``observers`` has ``observe(state)`` called at the start
+    and every ``every`` steps (``every`` None: at the start only), each with the
     backend in the state of ``state.k``. Returns a :class:`RunResult`; the backend is left in
     the last finite state.
     """
@@ -152,9 +153,9 @@ def run_loop(
         raise ModelError("give exactly one of steps and until_steady")
     if every < 1:
         raise ModelError(f"--every must be >= 1, got {every}")
-    for name, value in (("checkpoint-every", checkpoint_every), ("save-every", save_every)):
+    for value in (checkpoint_every, *(k for k, _ in observers)):
         if value is not None and value < 1:
-            raise ModelError(f"--{name} must be >= 1, got {value}")
+            raise ModelError(f"checkpoint and observer intervals must be >= 1, got {value}")
     total = steps if steps is not None else max_steps
     if total < 0:
         raise ModelError(f"steps must be >= 0, got {total}")
@@ -182,8 +183,8 @@ def run_loop(
     if start is None:
         record(diag)
         ls.last_E = diag["E"]
-    if on_save is not None:
-        on_save(ls)
+    for _, observe in observers:
+        observe(ls)
     last_diag, last_recorded_E = diag, ls.last_E
     status, message = "completed", ""
     bar = tqdm(total=total, initial=ls.k, disable=quiet, desc=label or "run", unit="step",
@@ -256,8 +257,9 @@ def run_loop(
                     ls.last_E = diag["E"]
             if on_checkpoint is not None and checkpoint_every and ls.k % checkpoint_every == 0:
                 on_checkpoint(ls)
-            if on_save is not None and save_every and ls.k % save_every == 0:
-                on_save(ls)
+            for every_k, observe in observers:
+                if every_k and ls.k % every_k == 0:
+                    observe(ls)
         else:
             if until_steady is not None:
                 status = "max_steps"

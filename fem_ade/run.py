@@ -70,6 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--save-every", type=int, metavar="K",
                    help="add phi (and mu) to the ParaView series OUT/phi.xdmf every K steps "
                         "(it always holds the first and the last state)")
+    p.add_argument("--shape-every", type=int, metavar="K",
+                   help="record the shape descriptors (label, components, genus, reduced "
+                        "volume, axes ratios, necks, dimple) every K steps in OUT/shapes.csv")
     p.add_argument("--no-render", action="store_true",
                    help="skip OUT/shape.png and OUT/history.png")
     p.add_argument("--out", help="output folder (default: runs/SCENE-BACKEND-TIME)")
@@ -137,6 +140,7 @@ def main(argv: list[str] | None = None) -> int:
             backend_options=options, scheme=args.scheme, constraints=args.constraints,
             adaptive=args.adaptive,
             checkpoint_every=args.checkpoint_every, save_every=args.save_every,
+            shape_every=args.shape_every,
             render=not args.no_render,
         )
     except ModelError as err:

@@ -79,6 +79,8 @@ def simulate(
     adaptive: bool | dict = False,
     checkpoint_every: int | None = None,
     save_every: int | None = None,
+    shape_every: int | None = None,
+    monitor=None,
     render: bool = True,
     out: str | Path | None = None,
     force: bool = False,
@@ -95,6 +97,10 @@ def simulate(
 
     ``adaptive=True`` lets Δt range over [Δt/1000, 1000Δt] (the paper's scheme: below ε³/κ);
     a dict gives the fields of :class:`fem_ade.loop.AdaptiveDt`.
+
+    ``shape_every=K`` records the shape descriptors every K steps (and at the start) in
+    ``OUT/shapes.csv`` and in the result's ``shapes`` (a transient shows as a label that comes
+    and goes); ``monitor(backend, row)`` (Python only) is then called with each row.
     """
     n = scene.n if n is None else n
     dt = scene.dt if dt is None else dt
@@ -112,7 +118,8 @@ def simulate(
     check_backend(backend, scene, n=n, dt=dt, scheme=scheme, constraints=constraints,
                   allow_underresolved=allow_underresolved, **options)
     check_loop_options(steps=steps, until_steady=until_steady, max_steps=max_steps, every=every,
-                       checkpoint_every=checkpoint_every, save_every=save_every)
+                       checkpoint_every=checkpoint_every, save_every=save_every,
+                       shape_every=shape_every)
     if not (math.isfinite(perturb) and perturb >= 0):
         raise ModelError(f"--perturb must be a number >= 0, got {perturb}")
     if not (isinstance(seed, int) and seed >= 0):
@@ -134,18 +141,18 @@ def simulate(
               "every": every, "ic": ic, "perturb": perturb, "seed": seed, "scheme": scheme,
               "constraints": constraints, "adaptive": adaptive,
               "checkpoint_every": checkpoint_every, "save_every": save_every,
-              "render": render, "backend_options": options}
-    return _execute(out, scene, config, quiet=quiet)
+              "shape_every": shape_every, "render": render, "backend_options": options}
+    return _execute(out, scene, config, quiet=quiet, monitor=monitor)
 
 
 def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_every=None,
-                       save_every=None) -> None:
+                       save_every=None, shape_every=None) -> None:
     """The loop's numbers, before anything is written (ModelError, one line)."""
     if (steps is None) == (until_steady is None):
         raise ModelError("give exactly one of steps and until_steady")
     for name, value, low in (("steps", steps, 0), ("max-steps", max_steps, 1),
                              ("every", every, 1), ("checkpoint-every", checkpoint_every, 1),
-                             ("save-every", save_every, 1)):
+                             ("save-every", save_every, 1), ("shape-every", shape_every, 1)):
         if value is None:
             continue
         if not (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
@@ -211,8 +218,46 @@ class _Series:
         self.xdmf.close()
 
 
+class _Shapes:
+    """The shape descriptors along a run (``shape_every``): rows of OUT/shapes.csv."""
+
+    COLUMNS = ("step", "t", "label", "components", "genus", "arms", "reduced_volume",
+               "reduced_area_difference", "elongation", "flatness", "necks", "dimple")
+
+    def __init__(self, be: Backend, path: Path | None, monitor, append: bool):
+        self.be, self.monitor, self.rows = be, monitor, []
+        self.file = None
+        if path is not None:
+            self.file = open(path, "a" if append else "w")  # noqa: SIM115
+            if not append:
+                self.file.write(",".join(self.COLUMNS) + "\n")
+                self.file.flush()
+
+    def observe(self, ls: LoopState) -> None:
+        shape, _ = describe_final(self.be, self.be.diagnostics())
+        if shape is None:
+            return
+        body = shape.get("body") or {}
+        row = {"step": ls.k, "t": ls.t, "label": shape["label"],
+               "components": shape["components"],
+               "genus": " ".join(map(str, shape["genus"])), "arms": shape["arms"],
+               "reduced_volume": shape["reduced_volume"],
+               "reduced_area_difference": shape["reduced_area_difference"],
+               **{k: body.get(k, "") for k in ("elongation", "flatness", "necks", "dimple")}}
+        self.rows.append(row)
+        if self.file is not None:
+            self.file.write(",".join(str(row[c]) for c in self.COLUMNS) + "\n")
+            self.file.flush()
+        if self.monitor is not None:
+            self.monitor(self.be, row)
+
+    def close(self):
+        if self.file is not None:
+            self.file.close()
+
+
 def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
-             start: tuple[dict, LoopState] | None = None) -> RunResult:
+             start: tuple[dict, LoopState] | None = None, monitor=None) -> RunResult:
     """Build the backend from ``config`` and run it; the one place simulate/resume share."""
     state, start_ls = start if start is not None else (None, None)
     be = make_backend(config["backend"], scene, n=config["n"], ic=config["ic"],
@@ -234,17 +279,24 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
         # the ParaView series: the start, every save_every steps, the end
         name = "phi.xdmf" if start is None else f"phi-from-{start_ls.k}.xdmf"
         series = _Series(out / name, be)
+    observers = [(config["save_every"], series.save)] if series else []
+    shapes = None
+    if config.get("shape_every"):
+        shapes = _Shapes(be, out / "shapes.csv" if out else None, monitor, start is not None)
+        observers.append((config["shape_every"], shapes.observe))
     try:
         result = run_loop(
             be, dt=config["dt"], steps=config["steps"], until_steady=config["until_steady"],
             max_steps=config["max_steps"], every=config["every"], quiet=quiet, history=writer,
             label=scene.name, adaptive=adaptive, checkpoint_every=config["checkpoint_every"],
             on_checkpoint=(lambda ls: write_checkpoint(out, be, ls)) if out else None,
-            save_every=config["save_every"], on_save=series.save if series else None,
-            start=start_ls)
+            observers=observers, start=start_ls)
     finally:
         if writer is not None:
             writer.close()
+        if shapes is not None:
+            shapes.close()
+    result.shapes = shapes.rows if shapes is not None else []
     result.shape, grid = describe_final(be, result.final)
     if out is not None:
         _finish(out, be, result, config, series, grid, earlier + result.history)
