@@ -60,6 +60,10 @@ class Backend(Protocol):
     def state(self) -> dict[str, np.ndarray]:
         """The full state as arrays the backend will not mutate later (for guards, checkpoints)."""
 
+    def extrapolate(self, anchor: dict[str, np.ndarray], beta: float) -> None:
+        """Momentum: move the field φ to φ + β(φ − φ_anchor), ``anchor`` a :meth:`state`; the
+        rest of the state (stabilization, ramp, warm starts) stays."""
+
     def set_state(self, state: dict[str, np.ndarray]) -> None:
         """Restore a state returned by :meth:`state` (ModelError if it does not fit)."""
 

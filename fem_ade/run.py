@@ -54,6 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--perturb", type=float, default=0.0,
                    help="amplitude of a smooth seeded level-set perturbation (default 0)")
     p.add_argument("--seed", type=int, default=0, help="seed of --perturb (default 0)")
+    p.add_argument("--phi0", metavar="RUN",
+                   help="start from the final field of an earlier run (its folder or its "
+                        "final.npz), resampled to this grid or mesh")
     p.add_argument("--scheme", choices=tuple(SCHEMES), default="paper",
                    help="; ".join(f"{k}: {v}" for k, v in SCHEMES.items()) + " (default paper)")
     p.add_argument("--constraints", choices=tuple(CONSTRAINTS), default="penalty",
@@ -63,6 +66,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the volume functional held at alpha: "
                    + "; ".join(f"{k}: {v}" for k, v in VOLUMES.items())
                    + " (default: the scene's, paper)")
+    p.add_argument("--accelerate", action="store_true",
+                   help="towards a steady state only: iterate the step with momentum and "
+                        "adaptive restart (same steady states, far fewer steps; t is then not "
+                        "a physical time)")
     p.add_argument("--adaptive", action="store_true",
                    help="adapt dt: grow while E_M decays, halve on a rejected step")
     p.add_argument("--checkpoint-every", type=int, metavar="K",
@@ -135,10 +142,11 @@ def main(argv: list[str] | None = None) -> int:
         result = simulate(
             scene, backend=args.backend, n=args.n, dt=args.dt, steps=args.steps,
             until_steady=args.until_steady, max_steps=args.max_steps, every=args.every,
-            ic=args.ic, perturb=args.perturb, seed=args.seed, out=out, force=args.force,
+            ic=args.ic, perturb=args.perturb, seed=args.seed, phi0=args.phi0, out=out,
+            force=args.force,
             quiet=args.quiet, allow_underresolved=args.allow_underresolved,
             backend_options=options, scheme=args.scheme, constraints=args.constraints,
-            adaptive=args.adaptive,
+            adaptive=args.adaptive, accelerate=args.accelerate,
             checkpoint_every=args.checkpoint_every, save_every=args.save_every,
             shape_every=args.shape_every,
             render=not args.no_render,

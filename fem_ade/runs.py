@@ -77,6 +77,7 @@ def simulate(
     scheme: str = "paper",
     constraints: str = "penalty",
     adaptive: bool | dict = False,
+    accelerate: bool = False,
     checkpoint_every: int | None = None,
     save_every: int | None = None,
     shape_every: int | None = None,
@@ -96,7 +97,8 @@ def simulate(
     anything is written; bad input raises :class:`fem_ade.model.ModelError`.
 
     ``adaptive=True`` lets Δt range over [Δt/1000, 1000Δt] (the paper's scheme: below ε³/κ);
-    a dict gives the fields of :class:`fem_ade.loop.AdaptiveDt`.
+    a dict gives the fields of :class:`fem_ade.loop.AdaptiveDt`. ``accelerate=True`` iterates
+    the step with momentum towards a steady state (:mod:`fem_ade.loop`; not a time history).
 
     ``shape_every=K`` records the shape descriptors every K steps (and at the start) in
     ``OUT/shapes.csv`` and in the result's ``shapes`` (a transient shows as a label that comes
@@ -130,6 +132,9 @@ def simulate(
                                                                0.9 * max_stable_dt(params))
         adaptive = {"dt_min": dt / 1000, "dt_max": max(dt, dt_max)}
     adaptive = asdict(AdaptiveDt(**adaptive)) if adaptive else None
+    if accelerate and adaptive:
+        raise ModelError("--accelerate and --adaptive do not go together (momentum needs a "
+                         "fixed step map)")
     out = check_out_dir(out, force=force) if out is not None else None
     if out is not None and initial is not None:  # an array start is kept with the run
         out.mkdir(parents=True, exist_ok=True)
@@ -139,7 +144,7 @@ def simulate(
               "backend": backend, "n": n, "dt": dt,
               "steps": steps, "until_steady": until_steady, "max_steps": max_steps,
               "every": every, "ic": ic, "perturb": perturb, "seed": seed, "scheme": scheme,
-              "constraints": constraints, "adaptive": adaptive,
+              "constraints": constraints, "adaptive": adaptive, "accelerate": accelerate,
               "checkpoint_every": checkpoint_every, "save_every": save_every,
               "shape_every": shape_every, "render": render, "backend_options": options}
     return _execute(out, scene, config, quiet=quiet, monitor=monitor)
@@ -189,15 +194,20 @@ def resume(out: str | Path, *, steps: int | None = None, quiet: bool = True) -> 
 # the run folder
 # ---------------------------------------------------------------------------------------
 def write_checkpoint(out: Path, backend: Backend, ls: LoopState) -> None:
-    """OUT/checkpoint.npz: the backend's state and the loop's, atomically."""
-    state = {f"state__{k}": v for k, v in backend.state().items()}
-    write_fields(out / "checkpoint.npz", state, loop=json.dumps(asdict(ls)))
+    """OUT/checkpoint.npz: the backend's state and the loop's (with momentum, its previous
+    iterate), atomically."""
+    arrays = {f"state__{k}": v for k, v in backend.state().items()}
+    arrays.update({f"anchor__{k}": v for k, v in (ls.anchor or {}).items()})
+    write_fields(out / "checkpoint.npz", arrays, loop=json.dumps(ls.to_json()))
 
 
 def read_checkpoint(out: Path) -> tuple[dict, LoopState]:
     with np.load(out / "checkpoint.npz") as z:
-        state = {k[len("state__"):]: z[k] for k in z.files if k.startswith("state__")}
-        ls = LoopState(**json.loads(str(z["loop"])))
+        def part(prefix):
+            return {k[len(prefix):]: z[k] for k in z.files if k.startswith(prefix)}
+
+        state, anchor = part("state__"), part("anchor__")
+        ls = LoopState(**json.loads(str(z["loop"])), anchor=anchor or None)
     return state, ls
 
 
@@ -290,7 +300,7 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
             max_steps=config["max_steps"], every=config["every"], quiet=quiet, history=writer,
             label=scene.name, adaptive=adaptive, checkpoint_every=config["checkpoint_every"],
             on_checkpoint=(lambda ls: write_checkpoint(out, be, ls)) if out else None,
-            observers=observers, start=start_ls)
+            observers=observers, start=start_ls, accelerate=config.get("accelerate", False))
     finally:
         if writer is not None:
             writer.close()
@@ -298,6 +308,7 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
             shapes.close()
     result.shapes = shapes.rows if shapes is not None else []
     result.shape, grid = describe_final(be, result.final)
+    result.final_grid = grid[0]
     if out is not None:
         _finish(out, be, result, config, series, grid, earlier + result.history)
     return result
@@ -344,6 +355,8 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict, series, gri
         **{k: config.get(k) for k in ("n", "dt", "scheme", "constraints", "ic", "perturb",
                                       "seed")},
         "adaptive": config["adaptive"],
+        "accelerate": config.get("accelerate", False),
+        "momentum_restarts": result.restarts,
         "steps": result.steps,
         "t": result.t,
         "dt_final": result.dt,

@@ -305,6 +305,9 @@ class SpectralBackend(BackendBase):
             state["stab"] = np.array(self.stab)
         return state
 
+    def extrapolate(self, anchor: dict, beta: float) -> None:
+        self._set_hat(self.phi_hat + beta * (self.phi_hat - anchor["phi_hat"]))
+
     def set_state(self, state: dict) -> None:
         phi_hat = np.asarray(state.get("phi_hat", np.zeros(0)))
         shape = self.k2.shape

@@ -39,6 +39,20 @@ def test_resume_is_bit_identical(cli, tmp_path, backend, constraints):
     assert json.loads((part / "summary.json").read_text())["steps"] == 30
 
 
+@pytest.mark.parametrize("backend", ["spectral", "fem"])
+def test_resume_with_momentum(cli, tmp_path, backend):
+    """--accelerate: the checkpoint holds the momentum (t_k and the previous iterate)."""
+    common = ["discocyte", "--n", "16", "--every", "5", "--quiet", "--allow-underresolved",
+              "--scheme", "stabilized", "--dt", "5e-5", "--accelerate", "--backend", backend,
+              "--constraints", "exact", "--no-render"]
+    whole, part = tmp_path / "whole", tmp_path / "part"
+    assert cli([*common, "--steps", "40", "--out", whole]).returncode == 0
+    r = cli([*common, "--steps", "25", "--checkpoint-every", "25", "--out", part])
+    assert r.returncode == 0, r.stderr
+    assert cli(["--resume", part, "--steps", "40", "--quiet"]).returncode == 0
+    _same_run(whole, part)
+
+
 def test_resume_with_adaptive_dt_and_stabilized_scheme(cli, tmp_path):
     common = ["discocyte", "--n", "16", "--every", "5", "--quiet", "--allow-underresolved",
               "--scheme", "stabilized", "--dt", "5e-6", "--adaptive", "--backend", "spectral",

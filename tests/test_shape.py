@@ -159,7 +159,7 @@ def _classified(ic, n=48, eps=0.02):
 
 
 def _shapes():
-    from fem_ade.initial import Capsule, Discocyte, Ellipsoid, Spheres, Sphere, Starfish, Torus
+    from fem_ade.initial import Capsule, Discocyte, Ellipsoid, Sphere, Spheres, Starfish, Torus
 
     c = (0.5, 0.5, 0.5)
     return {

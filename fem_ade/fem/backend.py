@@ -120,6 +120,10 @@ class FEMBackend(BackendBase):
             s["phi_prev"] = self.phi_prev.copy()
         return s
 
+    def extrapolate(self, anchor: dict, beta: float) -> None:
+        """φ ← φ + β(φ − φ_anchor); φⁿ⁻¹ (the warm start) stays."""
+        self._set(self.phi + beta * (self.phi - anchor["phi"]), self.phi_prev)
+
     def set_state(self, state: dict[str, np.ndarray]) -> None:
         phi = np.array(state.get("phi", np.zeros(0)), dtype=float).ravel()
         if phi.shape != (self.ops.n_dofs,):
