@@ -14,8 +14,9 @@ ellipsoid    centre, axes, c (or c_consistent, c_printed): s = c − Σ(xᵢ −
              (the paper's, SPEC §7; not a distance)
 sphere       centre, radius
 torus        centre, axis (default z), R (major), r (minor): a ring of tube radius r
-spheres      centres, radii, signs (default all +1): spheres joined in order; sign −1 carves a
-             sphere out (a nested vesicle: +1 outer, −1 inner, +1 innermost)
+spheres      centres, radii, signs (default all +1), neck (default 0): spheres joined in order;
+             sign −1 carves a sphere out (a nested vesicle: +1 outer, −1 inner); neck > 0
+             joins consecutive +1 spheres by tubes of radius neck × the smaller radius
 capsule      centre, axis, length, radius: a tube of this length with round ends
 starfish     centre, arms, length, radius, core, plane (default true), axis (default z):
              ``arms`` capsules of ``radius`` from the centre out to ``length``, in the plane
@@ -43,8 +44,9 @@ import numpy as np
 
 from .model import ModelError
 
-#: the readings of the paper's printed constant c (SPEC §7 erratum); other kinds have one
-IC_VARIANTS = ("consistent", "printed")
+#: initial-condition variants of a catalogue scene: the two readings of the paper's printed
+#: constant c (SPEC §7 erratum), and "seeded", the paper's figure's shape (fem_ade.seeds)
+IC_VARIANTS = ("consistent", "printed", "seeded")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -244,11 +246,13 @@ class Spheres(Shape):
     +1, −1 nested spheres a shell, +1, −1, +1 a vesicle inside a vesicle."""
 
     kind: ClassVar[str] = "spheres"
-    spec: ClassVar[dict] = {"centres": "vecs", "radii": "floats+", "signs": "signs"}
-    optional: ClassVar[tuple[str, ...]] = ("signs",)
+    spec: ClassVar[dict] = {"centres": "vecs", "radii": "floats+", "signs": "signs",
+                            "neck": "float"}
+    optional: ClassVar[tuple[str, ...]] = ("signs", "neck")
     centres: tuple[tuple[float, ...], ...]
     radii: tuple[float, ...]
     signs: tuple[int, ...] = ()
+    neck: float = 0.0
 
     def check(self, dim):
         super().check(dim)
@@ -268,6 +272,13 @@ class Spheres(Shape):
                 s = di if sign > 0 else -di
             else:
                 s = np.maximum(s, di) if sign > 0 else np.minimum(s, -di)
+        if self.neck > 0:  # tubes between consecutive spheres of sign +1
+            beads = [(np.asarray(c, float), R) for c, R, sign in
+                     zip(self.centres, self.radii, signs, strict=True) if sign > 0]
+            for (c0, r0), (c1, r1) in zip(beads, beads[1:], strict=False):
+                d = _offsets(points, c0, L)
+                tube = self.neck * min(r0, r1) - _segment_distance(d, 0 * c0, c1 - c0)
+                s = np.maximum(s, tube)
         return s, max(self.radii)
 
 
@@ -327,9 +338,9 @@ class Starfish(Shape):
 
 @dataclass(frozen=True)
 class Discocyte(Shape):
-    """The Evans–Fung red blood cell: s = h(ρ) − |z|, z along ``axis``, ρ the distance from
-    it, h = ½ d √(1 − ξ²)(c0 + c2 ξ² + c4 ξ⁴) for ξ = 2ρ/d < 1 (an approximate distance:
-    exact on the flat parts, compressed at the rim)."""
+    """The Evans–Fung red blood cell: z along ``axis``, ρ the distance from it, the surface
+    |z| = h(ρ) = ½ d √(1 − ξ²)(c0 + c2 ξ² + c4 ξ⁴), ξ = 2ρ/d ≤ 1; s is the signed distance
+    to it (so the tanh profile has its equilibrium width everywhere, the rim included)."""
 
     kind: ClassVar[str] = "discocyte"
     spec: ClassVar[dict] = {"centre": "vec", "axis": "vec", "diameter": "float+",
@@ -350,17 +361,27 @@ class Discocyte(Shape):
         if np.any(self.c0 + self.c2 * xi**2 + self.c4 * xi**4 <= 0):
             raise ModelError("ic discocyte: c0 + c2 ξ² + c4 ξ⁴ must stay positive on [0, 1)")
 
+    def profile(self, xi):
+        """h(ξ) = ½ d √(1 − ξ²)(c0 + c2 ξ² + c4 ξ⁴): the half-thickness at ρ = ξ d/2."""
+        x2 = xi * xi
+        return 0.5 * self.diameter * np.sqrt(np.maximum(1.0 - x2, 0.0)) * (
+            self.c0 + self.c2 * x2 + self.c4 * x2 * x2)
+
     def level(self, points, L, variant="consistent"):
+        from scipy.spatial import cKDTree
+
         d = _offsets(points, self.centre, L)
         n = _unit(self.axis, 3)
-        z = _along(d, n)
+        z = np.abs(_along(d, n))
         rho = np.sqrt(np.maximum(np.sum(d * d, axis=0) - z * z, 0.0))
-        xi2 = np.minimum((2.0 * rho / self.diameter) ** 2, 1.0)
-        h = 0.5 * self.diameter * np.sqrt(1.0 - xi2) * (self.c0 + self.c2 * xi2
-                                                          + self.c4 * xi2 * xi2)
-        outside = np.maximum(rho - 0.5 * self.diameter, 0.0)  # beyond the rim: the distance
-        return np.where(outside > 0, -np.sqrt(outside**2 + z * z), h - np.abs(z)), \
-            0.5 * self.diameter
+        half = 0.5 * self.diameter
+        # the signed distance to the profile curve in the (ρ, |z|) half-plane, the curve
+        # sampled densely (ξ = sin θ crowds the samples at the rim)
+        xi = np.sin(np.linspace(0.0, 0.5 * np.pi, 4001))
+        curve = np.column_stack([half * xi, self.profile(xi)])
+        dist, _ = cKDTree(curve).query(np.column_stack([rho.ravel(), z.ravel()]))
+        inside = (rho < half) & (z < self.profile(np.minimum(rho / half, 1.0)))
+        return np.where(inside, 1.0, -1.0) * dist.reshape(rho.shape), half
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ import sys
 import time
 from pathlib import Path
 
+from .initial import IC_VARIANTS
 from .loop import EXIT_BAD_INPUT
 from .model import ModelError
 from .output import read_json
@@ -49,8 +50,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-steps", type=int, default=100_000,
                    help="cap for --until-steady (default 100000)")
     p.add_argument("--every", type=int, default=10, help="record every K steps (default 10)")
-    p.add_argument("--ic", choices=("consistent", "printed"), default="consistent",
-                   help="initial condition: the consistent reading (default) or the printed one")
+    p.add_argument("--ic", choices=IC_VARIANTS, default="consistent",
+                   help="initial condition: the paper's ellipsoid with c read consistently "
+                        "(default) or as printed (SPEC §7), or seeded: the shape of the "
+                        "paper's figure, sized so that its diffuse V, A are alpha, beta")
     p.add_argument("--perturb", type=float, default=0.0,
                    help="amplitude of a smooth seeded level-set perturbation (default 0)")
     p.add_argument("--seed", type=int, default=0, help="seed of --perturb (default 0)")

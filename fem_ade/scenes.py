@@ -72,7 +72,12 @@ class Scene:
                 raise ModelError("--perturb applies to level-set initial conditions, not to a "
                                  "field read from a file")
             return self.ic.field_values(points, self.params.L)
-        s, scale = self.ic.level(points, self.params.L, ic)
+        shape = self.ic
+        if ic == "seeded":
+            from .seeds import seeded_shape
+
+            shape = seeded_shape(self.name)
+        s, scale = shape.level(points, self.params.L, ic)
         if perturb:
             s = s + perturb * scale * smooth_perturbation(points, self.params.L, seed)
         return np.tanh(s / (math.sqrt(2.0) * self.params.eps))

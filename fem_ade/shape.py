@@ -323,9 +323,10 @@ def count_arms(S: Surface, c: int, *, threshold: float = 0.1,
 
     1. its persistence r(peak) − r(s) is at least ``threshold``·max r (this removes the
        discretisation noise of nearly constant r, e.g. on a sphere), and
-    2. its lobe peak nearest to s and the other region's lobe peak nearest to s cannot see
-       each other through the body: φ < ``see_level`` somewhere on the straight segment
-       between them (φ by trilinear interpolation).
+    2. its lobe peak nearest to s and the other region's lobe peak nearest to s are less
+       than 135° apart seen from the centroid (neighbouring arms), or cannot see each other
+       through the body: φ < ``see_level`` somewhere on the straight segment between them
+       (φ by trilinear interpolation).
 
     Otherwise the two meet within one lobe. So a convex body has one lobe however elongated
     (the two tips of a prolate ellipsoid see each other through the centre), while adjacent
@@ -383,6 +384,12 @@ def count_arms(S: Surface, c: int, *, threshold: float = 0.1,
             seg_cache[key] = bool(S.phi_at(P[i] + s * (P[j] - P[i])).min() >= see_level)
         return seg_cache[key]
 
+    def apart(i: int, j: int) -> bool:
+        """Two peaks less than 135° apart seen from the centroid: neighbouring arms, even
+        where the segment between them crosses the body (stubby arms of a fat starfish)."""
+        a, b = P[i] - xc, P[j] - xc
+        return float(a @ b) > -0.7 * float(np.linalg.norm(a) * np.linalg.norm(b))
+
     def nearest(peaks: list[int], v: int) -> int:
         d = np.linalg.norm(P[peaks] - P[v], axis=1)
         return peaks[int(np.argmin(d))]
@@ -399,7 +406,7 @@ def count_arms(S: Surface, c: int, *, threshold: float = 0.1,
         for other in ordered[1:]:
             parent[other] = main
             a, b = nearest(lobes[main], v), nearest(lobes[other], v)
-            if r[peak[other]] - r[v] >= tol and not sees(a, b):
+            if r[peak[other]] - r[v] >= tol and (not sees(a, b) or apart(a, b)):
                 lobes[main] = lobes[main] + lobes[other]
             else:  # one lobe: keep the higher of the two meeting peaks
                 keep = [q for q in lobes[other] if q != b]
