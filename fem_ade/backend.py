@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import os
 from dataclasses import replace
 from typing import Protocol, runtime_checkable
 
@@ -164,6 +165,12 @@ class BackendBase:
     def max_abs_phi(self) -> float:
         m = float(np.max(np.abs(self.phi)))
         return m if math.isfinite(m) else math.nan
+
+
+def fft_workers() -> int:
+    """Threads of scipy's FFTs: ``FEM_ADE_FFT_WORKERS`` (e.g. 1 for a background job beside
+    other work), else all cores (-1)."""
+    return int(os.environ.get("FEM_ADE_FFT_WORKERS", "-1"))
 
 
 def check_choice(what: str, value, valid) -> None:

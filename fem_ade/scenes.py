@@ -58,7 +58,8 @@ class Scene:
         ``perturb`` > 0 adds a smooth, seeded perturbation of the level set:
         s → s + perturb · scale · ψ(x), with ψ a random combination of the periodic Fourier
         modes of |k|∞ ≤ 2 normalised so that |ψ| ≤ 1. It breaks symmetries without adding
-        grid-scale noise (which the paper's scheme does not survive, SPEC §7).
+        grid-scale noise (which the paper's scheme does not survive, SPEC §7). A field (kind
+        "file") is perturbed the same way through its level set s = √2ε artanh φ.
         """
         if ic not in IC_VARIANTS:
             raise ModelError(f"unknown initial condition variant {ic!r}; use one of {IC_VARIANTS}")
@@ -67,11 +68,19 @@ class Scene:
             raise ValueError(
                 f"scene {self.name} is {self.dim}D; got points of shape {points.shape}"
             )
+        w = math.sqrt(2.0) * self.params.eps
         if self.ic.is_field:
-            if perturb:
-                raise ModelError("--perturb applies to level-set initial conditions, not to a "
-                                 "field read from a file")
-            return self.ic.field_values(points, self.params.L)
+            phi = self.ic.field_values(points, self.params.L)
+            if not perturb:
+                return phi
+            # its level set s = √2ε artanh φ, perturbed in units of the radius R_V of a sphere
+            # of its volume (a kick that tells a stable steady state from a saddle)
+            volume = float(np.mean(phi + 1.0) / 2.0) * self.params.L**self.dim
+            scale = (3.0 * volume / (4.0 * math.pi)) ** (1.0 / 3.0) if self.dim == 3 else (
+                math.sqrt(volume / math.pi))
+            s = w * np.arctanh(np.clip(phi, -1.0 + 1e-12, 1.0 - 1e-12))
+            return np.tanh((s + perturb * scale * smooth_perturbation(points, self.params.L,
+                                                                      seed)) / w)
         shape = self.ic
         if ic == "seeded":
             from .seeds import seeded_shape
@@ -80,7 +89,7 @@ class Scene:
         s, scale = shape.level(points, self.params.L, ic)
         if perturb:
             s = s + perturb * scale * smooth_perturbation(points, self.params.L, seed)
-        return np.tanh(s / (math.sqrt(2.0) * self.params.eps))
+        return np.tanh(s / w)
 
     def with_(self, **changes) -> Scene:
         """A copy with scene fields or parameters changed (parameter names go to Params)."""

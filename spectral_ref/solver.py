@@ -25,7 +25,7 @@ import math
 import numpy as np
 from scipy import fft
 
-from fem_ade.backend import BackendBase
+from fem_ade.backend import BackendBase, fft_workers
 from fem_ade.constraints import solve_multipliers
 from fem_ade.model import ModelError, ratchet_stabilization, stabilization_coefficients
 from fem_ade.xdmf import closed_grid_values, grid_mesh
@@ -135,7 +135,7 @@ class SpectralBackend(BackendBase):
         self.dim = dim = self.scene.dim
         L = self.params.L
         self.dV = (L / n) ** dim
-        self.workers = workers if workers is not None else -1
+        self.workers = workers if workers is not None else fft_workers()
         self.axes = tuple(range(dim))
         x = np.arange(n) * (L / n)
         self.points = np.stack(np.meshgrid(*[x] * dim, indexing="ij"))

@@ -77,6 +77,19 @@ def check_bench_fem(result, out):
         assert row["step_s"] > 0 and 1 <= row["its"] <= 60, row
 
 
+def check_gallery(result, out):
+    """Every case ran, was analysed and has a verdict; the report and a montage exist."""
+    verdicts = result["report"]["verdicts"]
+    print(verdicts)
+    assert len(verdicts) == len(result["results"]) >= 5
+    assert all(isinstance(v, str) and v != "not run" for v in verdicts.values())
+    kicked = [a for a in result["results"].values() if a["status"] == "steady"]
+    assert kicked, "a quick steady run and its kick"
+    text = (out / "gallery.md").read_text()
+    assert "| discocyte (Fig. 1) | discocyte |" in text
+    assert (out / "montage-spectral.png").is_file()
+
+
 def check_convergence_fem(rates, out):
     assert min(rates["ellipse-2d"]["Q1"][q] for q in ("E", "V", "A")) > 1.7
     assert min(rates["ellipse-2d"]["Q2"][q] for q in ("E", "V", "A")) > 3.0

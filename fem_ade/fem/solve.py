@@ -188,9 +188,13 @@ def fft_step_inverse(grid, *, dt, kappa, eps, s0=0.0, s2=0.0):
     inv = 1.0 / symbol
     axes = tuple(range(dim))
 
+    from ..backend import fft_workers
+
+    workers = fft_workers()
+
     def apply(r):
-        rh = fft.rfftn(r.reshape(shape), axes=axes, workers=-1)
-        return fft.irfftn(rh * inv, s=shape, axes=axes, workers=-1).ravel()
+        rh = fft.rfftn(r.reshape(shape), axes=axes, workers=workers)
+        return fft.irfftn(rh * inv, s=shape, axes=axes, workers=workers).ravel()
 
     return apply
 

@@ -1,0 +1,508 @@
+"""The paper's gallery, settled: what the model makes of each of the thirteen shapes.
+
+For every paper scene and both backends (spectral at the paper's resolution; FEM Q1 on the
+same uniform mesh with the ``fft`` solver, which solves the same FEM system exactly and is
+≈ 15× cheaper than AMG there), the variants
+
+* ``a``      the paper's recipe: its scheme, penalties and Δt, from its initial condition,
+             for a stated number of steps, the shape recorded along the way (a transient
+             shows as a label that comes and goes);
+* ``b``      the best numerics: stabilized scheme at 100× Δt, exact constraints, the paper's
+             initial condition with a smooth perturbation (``perturb`` 0.05, seed 1), iterated
+             with momentum (``accelerate``) to a steady state, with the paper's volume
+             functional; ``b-loc`` the same with the localized one (``--volume localized``);
+* ``c``      the same numerics from the paper's own shape (``--ic seeded``), perturbed the
+             same way: does it stay? Its energy beside ``b``'s end;
+* ``d``      (``discocyte``, ``torus``; spectral) ``b`` with ε halved (ΔA₀ halved with D, so
+             that the reduced targets stay) and n doubled: the sharp-interface check.
+
+Steady means: the relative change of E_M per step over a record interval below ``TOL``
+and the same shape label over the last records. A steady state can be a saddle (the energy
+rate cannot tell): every steady end of ``b``, ``b-loc``, ``c``, ``d`` is kicked with another
+smooth perturbation (0.05, seed 2) and run to a steady state again (``kick``); it is stable
+if the kick returns to the same label and E (to 1e-4), else the kick's end is reported too.
+
+Results in ``studies/results/gallery/``: one folder per run (``runs/VARIANT/BACKEND/SCENE``
+with summary.json, history.csv, shapes.csv, shape.png, analysis.json, and ``kick/``), the
+table ``gallery.md``, a montage per backend (``montage-BACKEND.png``: rows are scenes,
+columns variants) and the phase diagram ``phase-diagram.png``. Resumable: a finished run is
+skipped, an interrupted one resumes from its checkpoint; large files (final.npz, series,
+checkpoints) are deleted once a case is analysed (``--keep`` keeps them).
+
+    python studies/gallery.py                                # everything (hours)
+    python studies/gallery.py --backend spectral --variants a b
+    python studies/gallery.py --report-only                  # table, montages, diagram
+    python studies/gallery.py --quick --out /tmp/g           # a smoke run (seconds)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+OUT = Path(__file__).resolve().parent / "results" / "gallery"
+VARIANTS = ("a", "b", "b-loc", "c", "d")
+BACKENDS = ("spectral", "fem")
+TOL = 1e-9
+#: steps of the paper's recipe (variant a) per backend, and the cap of the steady-state runs
+STEPS_A = {"spectral": 20000, "fem": 20000}
+MAX_STEPS = 20000
+PERTURB, KICK = (0.05, 1), (0.05, 2)
+SCENES_D = ("discocyte", "torus")
+
+
+def plan(scene_names, backends, variants, quick: bool) -> list[dict]:
+    """The runs: one dict of simulate() keyword arguments (and bookkeeping) per case."""
+    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.seeds import SIZES
+
+    cases = []
+    for name in scene_names:
+        scene = PAPER_SCENES[name]
+        for variant in variants:
+            for backend in backends:
+                if variant == "d" and (backend != "spectral" or name not in SCENES_D):
+                    continue
+                if variant == "c" and name not in SIZES:
+                    continue
+                n = scene.n * (2 if variant == "d" else 1)
+                if quick:
+                    n = 12 if scene.params.L == 1.0 else 24
+                kw = {"backend": backend, "n": n, "every": 50,
+                      "backend_options": {"solver": "fft"} if backend == "fem" else {},
+                      "allow_underresolved": quick, "checkpoint_every": 1000}
+                if variant == "a":
+                    steps = 20 if quick else STEPS_A[backend]
+                    kw.update(steps=steps, every=max(1, steps // 100),
+                              shape_every=max(1, steps // 40))
+                else:
+                    kw.update(scheme="stabilized", constraints="exact", accelerate=True,
+                              until_steady=3e-3 if quick else TOL,
+                              max_steps=60 if quick else MAX_STEPS, shape_every=10 if quick
+                              else 250, perturb=PERTURB[0], seed=PERTURB[1])
+                    kw["every"] = 10 if quick else 50
+                    kw["dt"] = 100 * scene.dt / (8 if variant == "d" else 1)
+                    if variant == "c":
+                        kw["ic"] = "seeded"
+                cases.append({"variant": variant, "backend": backend, "scene": name,
+                              "kwargs": kw})
+    return cases
+
+
+def scene_for(case: dict):
+    from fem_ade.scenes import PAPER_SCENES
+
+    scene = PAPER_SCENES[case["scene"]]
+    if case["variant"] == "b-loc":
+        scene = scene.with_(volume_functional="localized")
+    if case["variant"] == "d":  # ε halved; D = 2ε/3 follows, ΔA₀ with it (same Δa₀)
+        p = scene.params
+        scene = scene.with_(eps=p.eps / 2, delta_A0=p.delta_A0 / 2)
+    return scene
+
+
+def case_dir(root: Path, case: dict) -> Path:
+    return root / "runs" / case["variant"] / case["backend"] / case["scene"]
+
+
+FINISHED = ("completed", "steady", "max_steps", "diverged")
+
+
+def _finished(folder: Path) -> bool:
+    try:
+        return json.loads((folder / "summary.json").read_text())["status"] in FINISHED
+    except (OSError, ValueError, KeyError):
+        return False
+
+
+def _run(scene, folder: Path, kwargs: dict, quiet: bool):
+    """simulate() into ``folder``, or resume it, or skip it if it finished."""
+    from fem_ade.runs import resume, simulate
+
+    if _finished(folder):
+        return None
+    if (folder / "checkpoint.npz").is_file() and (folder / "run.json").is_file():
+        return resume(folder, quiet=quiet)
+    return simulate(scene, out=folder, force=True, quiet=quiet, render=True, **kwargs)
+
+
+def far_field(phi: np.ndarray, L: float, eps: float, far: float = 6.0) -> float:
+    """Median of φ over grid points farther than ``far``·ε from {φ ≥ 0} (periodic)."""
+    from scipy import ndimage
+
+    n = phi.shape[0]
+    k = int(math.ceil(far * eps * n / L))
+    inside = np.pad(phi >= 0, k, mode="wrap")
+    near = ndimage.distance_transform_edt(~inside) * (L / n) <= far * eps
+    near = near[(slice(k, -k),) * phi.ndim]
+    return float(np.median(phi[~near])) if (~near).any() else math.nan
+
+
+def analyse(folder: Path, scene) -> dict:
+    """What the table needs from a finished run folder: the summary, the far field, the
+    shapes along the way; written to analysis.json so the large files can go."""
+    summary = json.loads((folder / "summary.json").read_text())
+    out = {"status": summary["status"], "steps": summary["steps"], "t": summary["t"],
+           "wall_s": summary["wall_s"], "final": summary["final"], "shape": summary["shape"],
+           "verdict": summary.get("verdict"), "restarts": summary.get("momentum_restarts", 0)}
+    final = folder / "final.npz"
+    if final.is_file():
+        with np.load(final) as z:
+            phi = np.array(z["phi_grid"] if "phi_grid" in z.files else z["phi"])
+        out["far_field"] = far_field(phi, scene.params.L, scene.params.eps)
+    shapes = folder / "shapes.csv"
+    if shapes.is_file():
+        lines = shapes.read_text().splitlines()
+        head = lines[0].split(",")
+        out["shapes"] = [dict(zip(head, line.split(","), strict=True)) for line in lines[1:]]
+    history = folder / "history.csv"
+    if history.is_file():
+        from fem_ade.output import read_history
+
+        h = read_history(history)
+        E = h["E"]
+        k = max(1, len(E) // 10)
+        out["last_rate"] = (float(abs(E[-1] - E[-1 - k]) / ((h["step"][-1] - h["step"][-1 - k])
+                                                            * abs(E[-1])))
+                            if len(E) > k and h["step"][-1] > h["step"][-1 - k] else math.nan)
+        out["E_rises"] = int(np.sum(np.diff(E) > 1e-12 * np.abs(E[1:])))
+    (folder / "analysis.json").write_text(json.dumps(out, indent=1, default=str))
+    return out
+
+
+def slim(folder: Path) -> None:
+    """Delete what the results do not need (fields, series, checkpoints) and make the
+    pictures compact (256 colours)."""
+    for name in ("final.npz", "checkpoint.npz", "phi.h5", "phi.xdmf", "run.json",
+                 "initial.npz"):
+        (folder / name).unlink(missing_ok=True)
+    for p in folder.glob("phi-from-*"):
+        p.unlink()
+    for png in folder.glob("*.png"):
+        try:
+            from PIL import Image
+
+            with Image.open(png) as im:
+                small = im.convert("RGB").quantize(256)
+            small.save(png, optimize=True)
+        except OSError:
+            pass
+
+
+def run_case(root: Path, case: dict, *, quiet: bool, keep: bool) -> dict:
+    folder = case_dir(root, case)
+    scene = scene_for(case)
+    if (folder / "analysis.json").is_file() and (
+            case["variant"] == "a" or (folder / "kick" / "analysis.json").is_file()):
+        return json.loads((folder / "analysis.json").read_text())
+    t0 = time.perf_counter()
+    _run(scene, folder, case["kwargs"], quiet)
+    result = analyse(folder, scene)
+    if case["variant"] != "a" and result["status"] == "steady":
+        kick = folder / "kick"
+        kw = dict(case["kwargs"], perturb=KICK[0], seed=KICK[1], phi0=str(folder),
+                  ic="consistent")
+        _run(scene, kick, kw, quiet)
+        analyse(kick, scene)
+        if not keep:
+            slim(kick)
+    if not keep:
+        slim(folder)
+    print(f"{case['variant']:5s} {case['backend']:8s} {case['scene']:16s} {result['status']:9s}"
+          f" {result['steps']:6d} steps  {result['shape']['label'] if result['shape'] else '-':14s}"
+          f" E {result['final']['E']:.6g}  ({time.perf_counter() - t0:.0f} s)", flush=True)
+    return result
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", default=str(OUT), help="results folder (default %(default)s)")
+    ap.add_argument("--scenes", nargs="*", default=None)
+    ap.add_argument("--backend", nargs="*", default=None, choices=BACKENDS,
+                    help="default: both (--quick: spectral)")
+    ap.add_argument("--variants", nargs="*", default=list(VARIANTS), choices=VARIANTS)
+    ap.add_argument("--quick", action="store_true", help="tiny grids and runs (also when CI)")
+    ap.add_argument("--report-only", action="store_true")
+    ap.add_argument("--keep", action="store_true", help="keep fields, series and checkpoints")
+    ap.add_argument("--verbose", action="store_true", help="progress bars")
+    args = ap.parse_args(argv)
+    from fem_ade.scenes import PAPER_SCENES
+
+    quick = args.quick or bool(os.environ.get("CI"))
+    root = Path(args.out)
+    names = args.scenes or (["discocyte"] if quick else list(PAPER_SCENES))
+    backends = args.backend or (["spectral"] if quick else list(BACKENDS))
+    cases = plan(names, backends, args.variants, quick)
+    results = {}
+    for case in cases:
+        key = (case["variant"], case["backend"], case["scene"])
+        if args.report_only:
+            path = case_dir(root, case) / "analysis.json"
+            if path.is_file():
+                results[key] = json.loads(path.read_text())
+            continue
+        results[key] = run_case(root, case, quiet=not args.verbose, keep=args.keep)
+    report = write_report(root, names, backends, args.variants, quick=quick)
+    return {"results": results, "report": report}
+
+
+# ---------------------------------------------------------------------------------------
+# the report: verdicts, tables, montages, phase diagram
+# ---------------------------------------------------------------------------------------
+def _load(root: Path, variant: str, backend: str, name: str) -> dict | None:
+    folder = root / "runs" / variant / backend / name
+    path = folder / "analysis.json"
+    if not path.is_file():
+        return None
+    a = json.loads(path.read_text())
+    kick = folder / "kick" / "analysis.json"
+    if kick.is_file():
+        a["kick"] = json.loads(kick.read_text())
+    a["folder"] = str(folder)
+    return a
+
+
+def _label(a: dict | None) -> str:
+    return a["shape"]["label"] if a and a.get("shape") else "-"
+
+
+def verdict(a: dict | None, paper: str, variant: str) -> str:
+    """reproduced / transient (window) / different steady shape (which) / not converged,
+    with the stability the kick showed."""
+    if a is None:
+        return "not run"
+    label = _label(a)
+    if a["status"] == "diverged":
+        return f"diverged at step {a['steps']}"
+    if variant == "a":
+        seen = [r for r in a.get("shapes", []) if r["label"] == paper]
+        settled = a.get("last_rate", 1.0) < 1e-8
+        if label == paper:
+            return "reproduced" + ("" if settled else " (still evolving)")
+        if seen:
+            t0, t1 = float(seen[0]["t"]), float(seen[-1]["t"])
+            return f"transient: {paper} for t in [{t0:.3g}, {t1:.3g}], then {label}"
+        return (f"different steady shape: {label}" if settled
+                else f"not converged ({label} at the end)")
+    if a["status"] != "steady":
+        return f"not converged ({label} after {a['steps']} steps)"
+    kick = a.get("kick")
+    stable = None
+    if kick is not None and kick.get("shape"):
+        dE = abs(kick["final"]["E"] - a["final"]["E"]) / abs(a["final"]["E"])
+        stable = _label(kick) == label and dE < 1e-4
+    what = "reproduced" if label == paper else f"different steady shape: {label}"
+    if stable is None:
+        return what + " (stability not tested)"
+    if stable:
+        return what + ", stable"
+    lower = "lower" if kick["final"]["E"] < a["final"]["E"] else "higher"
+    return (what + f" — a saddle: a kick ends as {_label(kick)} at E = "
+            f"{kick['final']['E']:.5g} ({lower})")
+
+
+def _f(x, fmt="{:.4g}"):
+    try:
+        return fmt.format(float(x)) if x is not None and math.isfinite(float(x)) else "-"
+    except (TypeError, ValueError):
+        return "-"
+
+
+def _row(scene, variant, backend, a) -> str:
+    p = scene.params
+    if a is None:
+        return f"| {scene.name} | {variant} | {backend} | not run |" + " |" * 19
+    sh, fin = a.get("shape") or {}, a["final"]
+    body = sh.get("body") or {}
+    dA0 = fin["dA"] / p.delta_A0 if p.delta_A0 and fin.get("dA") else None
+    t = _f(a["t"], "{:.3g}") if variant == "a" else "—"
+    cells = [scene.name, variant, backend, a["status"], str(a["steps"]), t, sh.get("label", "-"),
+             str(sh.get("components", "-")), ",".join(map(str, sh.get("genus", []))) or "-",
+             str(sh.get("arms", "-")), _f(sh.get("reduced_volume"), "{:.3f}"),
+             _f(sh.get("reduced_area_difference"), "{:.3f}"),
+             _f(body.get("elongation"), "{:.2f}"), _f(body.get("flatness"), "{:.2f}"),
+             str(body.get("necks", "-")), _f(body.get("dimple"), "{:.2f}"),
+             _f(fin["V"] / p.alpha, "{:.4f}"), _f(fin["A"] / p.beta, "{:.4f}"),
+             _f(dA0, "{:.3f}"), _f(a.get("far_field"), "{:.4f}"), _f(fin["E"], "{:.5g}"),
+             _f(fin["W"], "{:.5g}"), _f(fin["G"], "{:.4g}"), _f(a["wall_s"], "{:.0f}"),
+             verdict(a, scene.shape, variant)]
+    return "| " + " | ".join(cells) + " |"
+
+
+HEADER = ("| scene | variant | backend | status | steps | t | label | comps | genus | arms | "
+          "v | Δa | a₁/a₂ | a₃/a₂ | necks | dimple | V/α | A/β | ΔA/ΔA₀ | φ far | E | W | G | "
+          "wall s | verdict |")
+
+
+def write_report(root: Path, names, backends, variants, quick: bool = False) -> dict:
+    """gallery.md, montage-BACKEND.png and phase-diagram.png from the analysed runs."""
+    from fem_ade.scenes import PAPER_SCENES
+
+    root.mkdir(parents=True, exist_ok=True)
+    data = {(v, b, n): _load(root, v, b, n) for v in variants for b in backends for n in names}
+    lines = ["# The paper's gallery, settled", "",
+             "Generated by `studies/gallery.py` (its docstring says what each variant runs). "
+             "Labels are those of `fem_ade.shape.classify`; v and Δa are the sharp surface's "
+             "reduced volume and area difference; V/α, A/β, ΔA/ΔA₀ the diffuse values; φ far "
+             "the median of φ farther than 6ε from the vesicle.", "",
+             "## Verdicts", "",
+             "| scene | paper | " + " | ".join(f"{v} ({b})" for v in variants for b in backends
+                                              if (v, b) != ("d", "fem")) + " |",
+             "|---|---|" + "---|" * sum(1 for v in variants for b in backends
+                                        if (v, b) != ("d", "fem"))]
+    for n in names:
+        scene = PAPER_SCENES[n]
+        cells = [verdict(data[(v, b, n)], scene.shape, v) if data[(v, b, n)] else "—"
+                 for v in variants for b in backends if (v, b) != ("d", "fem")]
+        lines.append(f"| {n} ({scene.figure}) | {scene.shape} | " + " | ".join(cells) + " |")
+    lines += ["", "## Every run", "", HEADER, "|---" * HEADER.count("|") + "|"[:0]]
+    lines[-1] = "|" + "---|" * (HEADER.count("|") - 1)
+    for n in names:
+        scene = PAPER_SCENES[n]
+        for v in variants:
+            for b in backends:
+                if (v, b) == ("d", "fem") or (v == "d" and n not in SCENES_D):
+                    continue
+                case = {"variant": v, "backend": b, "scene": n}
+                a = data[(v, b, n)]
+                lines.append(_row(scene_for(case), v, b, a))
+                if a is not None and a.get("kick"):
+                    lines.append(_row(scene_for(case), v + " kick", b, a["kick"]))
+    lines += ["", "## FEM against spectral (same variant, same scene)", "",
+              "| scene | variant | label spectral | label FEM | E spectral | E FEM | rel. diff |",
+              "|---|---|---|---|---|---|---|"]
+    for n in names:
+        for v in variants:
+            s, f = data.get((v, "spectral", n)), data.get((v, "fem", n))
+            if s and f:
+                Es, Ef = s["final"]["E"], f["final"]["E"]
+                lines.append(f"| {n} | {v} | {_label(s)} | {_label(f)} | {Es:.6g} | {Ef:.6g} | "
+                             f"{abs(Ef - Es) / abs(Es):.2e} |")
+    for b in backends:
+        path = montage(root, data, names, b, [v for v in variants if v != "d" or b == "spectral"])
+        if path:
+            lines += ["", f"![montage {b}]({path.name})"]
+    path = phase_diagram(root, data, names)
+    if path:
+        lines += ["", f"![phase diagram]({path.name})"]
+    notes = root / "notes.md"
+    if notes.is_file():
+        lines += ["", notes.read_text()]
+    (root / "gallery.md").write_text("\n".join(lines) + "\n")
+    return {"verdicts": {k: verdict(a, PAPER_SCENES[k[2]].shape, k[0]) for k, a in data.items()
+                         if a is not None}}
+
+
+def montage(root: Path, data, names, backend, variants) -> Path | None:
+    """Rows: scenes; columns: variants; each cell the run's shape.png (3D view and section)."""
+    from matplotlib.figure import Figure
+    from PIL import Image
+
+    cells = {(n, v): Path(data[(v, backend, n)]["folder"]) / "shape.png"
+             for n in names for v in variants if data.get((v, backend, n))}
+    cells = {k: p for k, p in cells.items() if p.is_file()}
+    if not cells:
+        return None
+    fig = Figure(figsize=(3.4 * len(variants) + 1.2, 1.9 * len(names) + 0.6), dpi=100)
+    grid = fig.subplots(len(names), len(variants), squeeze=False)
+    for i, n in enumerate(names):
+        for j, v in enumerate(variants):
+            ax = grid[i][j]
+            ax.set_axis_off()
+            if (n, v) in cells:
+                with Image.open(cells[(n, v)]) as im:
+                    w, h = im.size
+                    ax.imshow(np.asarray(im.convert("RGB").crop((0, int(0.17 * h), w, h))))
+                ax.set_title(_label(data[(v, backend, n)]), fontsize=8)
+            if i == 0:
+                ax.text(0.5, 1.35, f"variant {v}", transform=ax.transAxes, ha="center",
+                        fontsize=11, fontweight="bold")
+            if j == 0:
+                ax.text(-0.05, 0.5, n, transform=ax.transAxes, ha="right", va="center",
+                        fontsize=10, fontweight="bold")
+    fig.subplots_adjust(left=0.09, right=0.995, top=0.97, bottom=0.005, wspace=0.02,
+                        hspace=0.25)
+    path = root / f"montage-{backend}.png"
+    fig.savefig(path)
+    return path
+
+
+def spheroid_branches(k: int = 200):
+    """(v, Δa) of prolate and oblate spheroids: the reference branches of the diagram."""
+    th = np.linspace(1e-4, np.pi - 1e-4, 4001)
+    out = {}
+    for kind, ratios in (("prolate spheroids", np.linspace(1.0, 6.0, k)),
+                         ("oblate spheroids", np.linspace(1.0, 0.15, k))):
+        pts = []
+        for c in ratios:  # polar semi-axis c, equatorial 1
+            rho = np.sin(th)
+            dr, dz = np.cos(th), -c * np.sin(th)
+            ddr, ddz = -np.sin(th), -c * np.cos(th)
+            ds = np.sqrt(dr**2 + dz**2)
+            k1 = (dr * ddz - dz * ddr) / ds**3
+            k2 = -dz / (rho * ds)
+            dA = 2 * np.pi * rho * ds
+            A = np.trapezoid(dA, th)
+            H = np.trapezoid(0.5 * np.abs(k1 + k2) * dA, th)
+            V = 4.0 / 3.0 * np.pi * c
+            R = math.sqrt(A / (4 * np.pi))
+            pts.append((V / (4.0 / 3.0 * np.pi * R**3), H / (4 * np.pi * R)))
+        out[kind] = np.array(pts)
+    return out
+
+
+def phase_diagram(root: Path, data, names) -> Path | None:
+    """Every steady end state on the sharp-interface axes (v, Δa), with the targets."""
+    from matplotlib.figure import Figure
+
+    from fem_ade.scenes import PAPER_SCENES
+
+    fig = Figure(figsize=(9.5, 6.5), dpi=100)
+    ax = fig.subplots()
+    for kind, pts in spheroid_branches().items():
+        ax.plot(pts[:, 0], pts[:, 1], color="0.6", lw=1.2,
+                ls="-" if kind.startswith("prolate") else "--", label=kind)
+    ax.plot([1 / math.sqrt(2)], [math.sqrt(2)], "s", color="0.4", ms=7,
+            label="two equal spheres (limit)")
+    ax.plot([1], [1], "o", color="0.4", ms=7, label="sphere")
+    marks = {"b": "o", "b-loc": "^", "c": "D", "d": "*"}
+    colours = {}
+    palette = ["#c0392b", "#2980b9", "#27ae60", "#8e44ad", "#d35400", "#16a085", "#2c3e50",
+               "#f39c12", "#7f8c8d", "#e84393", "#6c5ce7", "#00b894", "#b33939"]
+    shown = False
+    for i, n in enumerate(names):
+        colours[n] = palette[i % len(palette)]
+        v0, m0 = PAPER_SCENES[n].params.reduced_targets()
+        ax.plot([v0], [m0], "x", color=colours[n], ms=9, mew=2)
+        for v, mk in marks.items():
+            a = data.get((v, "spectral", n))
+            if a and a.get("shape") and a["status"] == "steady":
+                sh = a["shape"]
+                ax.plot([sh["reduced_volume"]], [sh["reduced_area_difference"]], mk,
+                        color=colours[n], ms=7, mfc="none" if v == "b-loc" else colours[n],
+                        label=f"{n}" if v == "b" else None)
+                shown = True
+    if not shown:
+        return None
+    for v, mk in marks.items():
+        ax.plot([], [], mk, color="k", mfc="none" if v == "b-loc" else "k",
+                label=f"end of variant {v} (spectral)")
+    ax.plot([], [], "x", color="k", label="targets v₀, Δa₀ (diffuse α, β, ΔA₀)")
+    ax.set_xlabel("reduced volume v (sharp surface)")
+    ax.set_ylabel("reduced area difference Δa (sharp surface)")
+    ax.set_title("steady end states on the sharp-interface phase-diagram axes")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2, loc="upper left")
+    path = root / "phase-diagram.png"
+    fig.savefig(path, bbox_inches="tight")
+    return path
+
+
+if __name__ == "__main__":
+    main()
