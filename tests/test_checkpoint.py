@@ -23,12 +23,16 @@ def _same_run(a, b):
     assert np.array_equal(fa["phi"], fb["phi"])
 
 
-@pytest.mark.parametrize("backend, constraints", [("spectral", "penalty"), ("fem", "penalty"),
-                                                  ("spectral", "exact"), ("fem", "exact")])
+@pytest.mark.parametrize("backend, constraints", [
+    ("spectral", "penalty"), ("fem", "penalty"), ("spectral", "exact"), ("fem", "exact"),
+    ("fem-fft", "exact")])
 def test_resume_is_bit_identical(cli, tmp_path, backend, constraints):
-    """Exact constraints resume in the middle of their targets' ramp (17 steps)."""
-    common = ["discocyte", "--backend", backend, "--n", "16", "--every", "5", "--quiet",
-              "--allow-underresolved", "--constraints", constraints, "--no-render"]
+    """Exact constraints resume in the middle of their targets' ramp (17 steps); the FEM's
+    direct Fourier path (``fft``) keeps φ̂ as its state."""
+    solver = ["--solver", "fft"] if backend == "fem-fft" else []
+    common = ["discocyte", "--backend", backend.split("-")[0], *solver, "--n", "16", "--every",
+              "5", "--quiet", "--allow-underresolved", "--constraints", constraints,
+              "--no-render"]
     whole, part = tmp_path / "whole", tmp_path / "part"
     assert cli([*common, "--steps", "30", "--out", whole]).returncode == 0
     r = cli([*common, "--steps", "10", "--checkpoint-every", "10", "--out", part])

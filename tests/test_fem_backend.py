@@ -126,8 +126,9 @@ def test_sphere_values_converge(order, ns, rate):
 
 
 def test_solvers_agree_and_auto_choice():
-    """Every solver gives the same step (to the Krylov tolerance); ``auto`` takes the exact
-    fft solve on uniform Q1 and Chebyshev on a graded mesh at the paper's Δt."""
+    """Every solver gives the same step (to the Krylov tolerance); ``auto`` takes the direct
+    Fourier path on uniform Q1, Chebyshev on uniform Q2-free meshes without it, AMG on a
+    graded mesh (where Chebyshev's iterations grow with n)."""
     scene = get_scene("discocyte")
     results = {}
     for solver in ("amg", "chebyshev", "jacobi", "fft"):
@@ -137,9 +138,11 @@ def test_solvers_agree_and_auto_choice():
         results[solver] = b.state()["phi"]
     for solver, phi in results.items():
         assert np.abs(phi - results["fft"]).max() < 1e-7, solver
-    assert FEMBackend(scene, n=12, dt=scene.dt, solver="auto").info()["solver"] == "fft"
+    assert FEMBackend(scene, n=12, dt=scene.dt, solver="auto").info()["solver"] == "fft (direct)"
     graded = FEMBackend(scene, n=12, dt=scene.dt, solver="auto", mesh="graded")
-    assert graded.info()["solver"] == "chebyshev"
+    assert graded.info()["solver"] == "amg"
+    uniform = FEMBackend(scene, n=12, dt=scene.dt, solver="auto", assembly="skfem")
+    assert uniform.info()["solver"] == "chebyshev"
     with pytest.raises(ModelError, match="uniform tensor mesh"):
         FEMBackend(scene, n=12, dt=scene.dt, solver="fft", mesh="graded")
     with pytest.raises(ModelError, match="unknown FEM solver"):

@@ -108,20 +108,39 @@ class FEMBackend(BackendBase):
 
     # -- state -------------------------------------------------------------------------------
     def _set(self, phi, phi_prev):
+        if self.stepper.fourier is not None:  # the direct path keeps φ̂ as the state
+            self._set_hat(self.stepper.fourier.fwd(phi), phi_prev)
+            return
         self.phi = phi
         self.phi_prev = phi_prev
         self.Kphi = self.K @ phi
         self.mu = self.Kphi / self.w  # μ = −Δφ with the lumped mass: M_L μ = K φ
 
+    def _set_hat(self, phi_hat, phi_prev):
+        """The direct Fourier path (uniform Q1, ``fft``): φ, Kφ and μ from φ̂, so that φ̂
+        alone is the state (a resumed run is bit for bit the uninterrupted one)."""
+        F = self.stepper.fourier
+        self.phi_hat = phi_hat
+        self.phi = F.inv(phi_hat)
+        self.phi_prev = phi_prev
+        self.Kphi = F.inv(F.Kh * phi_hat)
+        self.mu = self.Kphi / self.w
+
     def state(self) -> dict[str, np.ndarray]:
         s = {"phi": self.phi.copy(), "mu": self.mu.copy(), **self.stepper.state(),
              **self.ramp_state()}
+        if self.stepper.fourier is not None:
+            s["phi_hat"] = self.phi_hat  # replaced, never mutated, by step()
         if self.phi_prev is not None:
             s["phi_prev"] = self.phi_prev.copy()
         return s
 
     def extrapolate(self, anchor: dict, beta: float) -> None:
         """φ ← φ + β(φ − φ_anchor); φⁿ⁻¹ (the warm start) stays."""
+        if self.stepper.fourier is not None:
+            self._set_hat(self.phi_hat + beta * (self.phi_hat - anchor["phi_hat"]),
+                          self.phi_prev)
+            return
         self._set(self.phi + beta * (self.phi - anchor["phi"]), self.phi_prev)
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -130,14 +149,23 @@ class FEMBackend(BackendBase):
             raise ModelError(f"the state has {phi.size} values of phi; this FEM space "
                              f"(Q{self.order}, n = {self.n}) has {self.ops.n_dofs}")
         prev = state.get("phi_prev")
-        self._set(phi, None if prev is None else np.array(prev, dtype=float).ravel())
+        prev = None if prev is None else np.array(prev, dtype=float).ravel()
+        if self.stepper.fourier is not None and "phi_hat" in state:
+            self._set_hat(np.array(state["phi_hat"]), prev)
+        else:
+            self._set(phi, prev)
         self.stepper.set_state(state)
         self.set_ramp_state(state)
         self.stepper.ramp = self.ramp
 
     # -- the step ----------------------------------------------------------------------------
     def step(self) -> dict:
-        """One step of the scheme (:meth:`fem_ade.fem.step.MixedStep.step`)."""
+        """One step of the scheme (:meth:`fem_ade.fem.step.MixedStep.step`, or its direct
+        Fourier path on uniform Q1 meshes)."""
+        if self.stepper.fourier is not None:
+            new, extra = self.stepper.fourier_step(self.phi_hat, self.phi, self.mu, self.Kphi)
+            self._set_hat(new, self.phi)
+            return extra
         phi, extra = self.stepper.step(self.phi, self.mu, self.Kphi, self.phi_prev)
         self._set(phi, self.phi)
         return extra
@@ -178,6 +206,7 @@ class FEMBackend(BackendBase):
 
     def info(self) -> dict:
         solver = self.stepper.solver
+        direct = self.stepper.fourier is not None
         return {
             "backend": self.name,
             "order": self.order,
@@ -189,7 +218,8 @@ class FEMBackend(BackendBase):
             "mass": self.stepper.mass,
             "scheme": self.scheme,
             "constraints": self.constraints,
-            "solver": solver.kind if solver else self.stepper.solver_opts["kind"],
+            "solver": "fft (direct)" if direct else solver.kind if solver else
+            self.stepper.solver_opts["kind"],
             "rtol": solver.rtol if solver else None,
             "amg_levels": solver.levels if solver else None,
             "dt": self.dt,

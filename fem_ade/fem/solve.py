@@ -15,14 +15,20 @@ P = (1/Δt)(M_t + sK) M_L⁻¹ (M_t + sK), s = √(Δtκε), P⁻¹ = Δt (M_t +
 where each (M_t + sK)⁻¹ is approximated by
 
 - ``amg``: one pyamg smoothed-aggregation V-cycle (iteration count flat in h and Δt);
-- ``chebyshev``: a fixed Chebyshev polynomial of D⁻¹(M_t + sK) (degree 4; cheap while M_t + sK
-  is mass-dominated, i.e. at the paper's Δt);
+- ``chebyshev``: a fixed Chebyshev polynomial of D⁻¹(M_t + sK) (degree 2 while M_t + sK is
+  strongly mass-dominated, as at the paper's Δt, else 4: :data:`CHEBYSHEV_LOW_DEGREE_LIMIT`);
 - ``jacobi``: the same with degree 1 (a scaled diagonal; cheapest, weakest);
-- ``auto``: ``fft`` where it applies, else ``chebyshev`` while M_t + sK is mass-dominated,
-  else ``amg`` (the measured winners, ``studies/bench_fem.py``);
+- ``auto``: ``fft`` where it applies, else ``chebyshev`` on meshes of uniform cells while
+  M_t + sK is mass-dominated, else ``amg`` (the measured winners, ``studies/bench.py``: on a
+  graded 64³ mesh Chebyshev needs 23 PCG iterations at the paper's Δt where AMG needs 8);
 - ``fft``: uniform Q1 tensor meshes only: there M, K and M_L are circulant (Kronecker products
-  of 1D circulants), so S is diagonalised by the discrete Fourier transform and P = S exactly
-  (one PCG iteration; a fast direct solver, kept inside PCG so the residual is still checked).
+  of 1D circulants), so S is diagonalised by the discrete Fourier transform. The backend then
+  takes the step directly in Fourier space, without PCG (:meth:`fem_ade.fem.step.MixedStep.
+  fourier_step`); :func:`fft_step_inverse` is the same S⁻¹ as a preconditioner.
+
+pyamg's coarse levels are converted to CSR (it keeps them as BSR with 1×1 blocks, whose
+Gauss–Seidel is its slow generic one), and S is applied with two sparse products when M_t is
+lumped, S x = (m/τ)x + K(c x + κε M_L⁻¹Kx).
 
 The stabilized scheme (SPEC §10) solves with S = (1/Δt + s₀)M_t + (s₂ − 2κ/ε)K + κε K M_L⁻¹ K
 plus a rank ≤ 3 term Σ σᵢbᵢbᵢᵀ (the penalties' Hessians), applied matrix-free inside PCG; the
@@ -51,6 +57,9 @@ from ..registry import FEM_SOLVERS as SOLVERS
 #: ``auto`` takes ``chebyshev`` while s·max(K_ii/m_i) ≤ this (M_L + sK mass-dominated enough
 #: that D⁻¹(M_L + sK) has condition ≤ 1 + 2·this by Gershgorin), else ``amg``
 AUTO_CHEBYSHEV_LIMIT = 20.0
+#: ``chebyshev`` takes degree 2 while s·max(K_ii/m_i) ≤ this (the paper's Δt: measured at 64³,
+#: discocyte, 5 PCG its and 9× the spectral step against 8 its and 19× at degree 4), else 4
+CHEBYSHEV_LOW_DEGREE_LIMIT = 2.0
 #: PCG stops at rtol·‖b − Sφⁿ‖. Measured (discocyte 32³, 50 steps, against the exact fft
 #: solve): |ΔE| = 3e-8 at 1e-6 and 2e-6 at 1e-5, against a discretisation error |ΔE| ≈ 3.
 DEFAULT_RTOL = 1e-6
@@ -154,47 +163,74 @@ def chebyshev_inverse(A: sp.csr_matrix, degree: int, lower_ratio: float = 30.0):
     return apply
 
 
+class FourierGrid:
+    """A uniform periodic Q1 grid (``shape`` nodes, spacings ``spacing``, DOFs in C order):
+    there M, K and M_L are circulant — Kronecker products of 1D circulants — so the Fourier
+    transform diagonalises them. Their symbols on the rfftn half-spectrum, at θ = 2πj/n:
+    1D mass h(4 + 2cos θ)/6, stiffness (2 − 2cos θ)/h, lumped mass h; in d dimensions
+    M̂ = Π m, K̂ = Σ_a k_a Π_{b≠a} m_b, M̂_L = Π h (a number, ``ml``)."""
+
+    def __init__(self, shape, spacing):
+        from scipy import fft
+
+        from ..backend import fft_workers
+
+        self.fft, self.workers = fft, fft_workers()
+        self.shape, dim = tuple(shape), len(shape)
+        self.axes = tuple(range(dim))
+        ms, ks = [], []
+        for a, (n, h) in enumerate(zip(shape, spacing, strict=True)):
+            theta = 2.0 * np.pi * (fft.rfftfreq(n) if a == dim - 1 else fft.fftfreq(n))
+            view = [1] * dim
+            view[a] = -1
+            ms.append((h * (4.0 + 2.0 * np.cos(theta)) / 6.0).reshape(view))
+            ks.append(((2.0 - 2.0 * np.cos(theta)) / h).reshape(view))
+        self.Mh = ms[0]
+        for m in ms[1:]:
+            self.Mh = self.Mh * m
+        self.Kh = 0.0
+        for a in range(dim):
+            term = ks[a]
+            for b in range(dim):
+                if b != a:
+                    term = term * ms[b]
+            self.Kh = self.Kh + term
+        self.ml = float(np.prod(spacing))
+        self.size = int(np.prod(shape))
+        n_last = shape[-1]
+        w = np.full(n_last // 2 + 1, 2.0)  # Parseval weights of the half-spectrum
+        w[0] = 1.0
+        if n_last % 2 == 0:
+            w[-1] = 1.0
+        self.parseval = w / self.size
+
+    def fwd(self, u):
+        return self.fft.rfftn(np.reshape(u, self.shape), axes=self.axes, workers=self.workers)
+
+    def inv(self, uh):
+        return self.fft.irfftn(uh, s=self.shape, axes=self.axes, workers=self.workers).ravel()
+
+    def dot(self, ah, bh) -> float:
+        """Σ_j a_j b_j of two real fields from their half-spectra (Parseval)."""
+        return float(np.sum(self.parseval * (np.conj(ah) * bh).real))
+
+    def symbol(self, *, mass_factor, c, ke, lumped=True):
+        """(M_L or M)·mass_factor + c K + ke K M_L⁻¹ K: S of the step, diagonal here."""
+        return ((self.ml if lumped else self.Mh) * mass_factor + c * self.Kh
+                + ke * self.Kh * self.Kh / self.ml)
+
+
 def fft_step_inverse(grid, *, dt, kappa, eps, s0=0.0, s2=0.0):
-    """S⁻¹ for uniform periodic Q1: ``grid`` = (n per axis, h per axis, lumped time mass).
-
-    1D symbols at θ = 2πj/n: mass h(4 + 2cos θ)/6, stiffness (2 − 2cos θ)/h, lumped mass h;
-    in d dimensions M̂ = Π m, K̂ = Σ_a k_a Π_{b≠a} m_b, M̂_L = Π h, and
-    Ŝ = (1/Δt + s₀)M̂ + (s₂ − 2κ/ε)K̂ + κε K̂²/M̂_L (positive when Δt < ε³/κ or s₂ ≥ 2κ/ε).
-    """
-    from scipy import fft
-
+    """S⁻¹ for uniform periodic Q1: ``grid`` = (n per axis, h per axis, lumped time mass);
+    Ŝ = (1/Δt + s₀)M̂_t + (s₂ − 2κ/ε)K̂ + κε K̂²/M̂_L (:class:`FourierGrid`), positive when
+    Δt < ε³/κ or s₂ ≥ 2κ/ε."""
     shape, hs, lumped = grid
-    dim = len(shape)
-    ms, ks = [], []
-    for a, (n, h) in enumerate(zip(shape, hs, strict=True)):
-        theta = 2.0 * np.pi * (fft.rfftfreq(n) if a == dim - 1 else fft.fftfreq(n))
-        view = [1] * dim
-        view[a] = -1
-        ms.append((h * (4.0 + 2.0 * np.cos(theta)) / 6.0).reshape(view))
-        ks.append(((2.0 - 2.0 * np.cos(theta)) / h).reshape(view))
-    Mh = ms[0]
-    for m in ms[1:]:
-        Mh = Mh * m
-    Kh = 0.0
-    for a in range(dim):
-        term = ks[a]
-        for b in range(dim):
-            if b != a:
-                term = term * ms[b]
-        Kh = Kh + term
-    ML = float(np.prod(hs))
-    symbol = ((ML if lumped else Mh) * (1.0 / dt + s0) + (s2 - 2.0 * kappa / eps) * Kh
-              + kappa * eps * Kh * Kh / ML)
-    inv = 1.0 / symbol
-    axes = tuple(range(dim))
-
-    from ..backend import fft_workers
-
-    workers = fft_workers()
+    F = FourierGrid(shape, hs)
+    inv = 1.0 / F.symbol(mass_factor=1.0 / dt + s0, c=s2 - 2.0 * kappa / eps,
+                         ke=kappa * eps, lumped=lumped)
 
     def apply(r):
-        rh = fft.rfftn(r.reshape(shape), axes=axes, workers=workers)
-        return fft.irfftn(rh * inv, s=shape, axes=axes, workers=workers).ravel()
+        return F.inv(F.fwd(r) * inv)
 
     return apply
 
@@ -231,8 +267,8 @@ class StepSolver:
     the stabilized one (its diagonal part; the low-rank terms are given to :meth:`solve`).
     """
 
-    def __init__(self, M, K, m, *, dt, kappa, eps, kind="amg", rtol=None, degree=4,
-                 grid=None, s0=0.0, s2=0.0, cache=None):
+    def __init__(self, M, K, m, *, dt, kappa, eps, kind="amg", rtol=None, degree=None,
+                 grid=None, s0=0.0, s2=0.0, cache=None, lumped=False):
         if kind not in SOLVERS:
             raise ModelError(f"unknown FEM solver {kind!r}; valid: {', '.join(SOLVERS)}")
         self.tau = dt if s0 == 0.0 else 1.0 / (1.0 / dt + s0)  # the effective time step
@@ -243,17 +279,25 @@ class StepSolver:
             self.s = SHIFT_GRID ** round(math.log(s_opt) / math.log(SHIFT_GRID))
         else:
             self.s = math.sqrt(dt * kappa * eps)
-        if kind == "auto":
-            stiffness = float(np.max(K.diagonal() / np.asarray(M.diagonal()).ravel()))
-            kind = ("fft" if grid is not None else
-                    "chebyshev" if self.s * stiffness <= AUTO_CHEBYSHEV_LIMIT else "amg")
+        # how far M_t + sK is from its mass: s·max(K_ii/m_i) (Gershgorin: cond(D⁻¹B) ≤ 1 + 2x)
+        stiffness = self.s * float(np.max(K.diagonal() / np.asarray(M.diagonal()).ravel()))
+        if kind == "auto":  # Chebyshev only on a uniform mesh of vertices: graded, file and
+            # Q2 meshes (lumped weights varying by more than 1.5) need AMG's flat counts
+            uniform = float(np.max(m) / np.min(m)) <= 1.5
+            kind = ("fft" if grid is not None else "chebyshev"
+                    if uniform and stiffness <= AUTO_CHEBYSHEV_LIMIT else "amg")
+        if degree is None:
+            degree = 2 if stiffness <= CHEBYSHEV_LOW_DEGREE_LIMIT else 4
+        self.degree = 1 if kind == "jacobi" else degree
         self.kind = kind
         self.rtol = DEFAULT_RTOL if rtol is None else float(rtol)
         self.K = K
         self.minv = 1.0 / m
         self.m = m
         self.ke = kappa * eps
-        self.A0 = (M / self.tau + self.c * K).tocsr()
+        # with M_t = M_L (diagonal), S x = (m/τ)x + K(c x + κε M_L⁻¹ K x): two sparse products
+        self.lumped = lumped
+        self.A0 = None if lumped else (M / self.tau + self.c * K).tocsr()
         n = M.shape[0]
         self.n = n
         self.dt = dt
@@ -279,11 +323,16 @@ class StepSolver:
 
                 ml = pyamg.smoothed_aggregation_solver(B, symmetry="hermitian", max_coarse=500,
                                                        **AMG_OPTIONS)
+                for level in ml.levels:  # pyamg keeps coarse levels as BSR with 1×1 blocks,
+                    level.A = level.A.tocsr()  # whose Gauss–Seidel is the slow generic one
+                    for name in ("P", "R"):
+                        if hasattr(level, name):
+                            setattr(level, name, getattr(level, name).tocsr())
                 self.levels = len(ml.levels)
                 self.B_inv = amg_vcycle(ml)
             else:
                 self.levels = 1
-                self.B_inv = chebyshev_inverse(B, 1 if kind == "jacobi" else degree)
+                self.B_inv = chebyshev_inverse(B, self.degree)
             if cache is not None and kind != "fft" and key not in cache:
                 if len(cache) >= 4:
                     cache.pop(next(iter(cache)))
@@ -296,7 +345,10 @@ class StepSolver:
     def apply(self, x):
         """S x = (M_t/τ + cK) x + κε K (M_L⁻¹ K x)."""
         x = np.asarray(x).ravel()
-        return self.A0 @ x + self.ke * (self.K @ (self.minv * (self.K @ x)))
+        Kx = self.K @ x
+        if self.lumped:
+            return (self.m / self.tau) * x + self.K @ (self.c * x + self.ke * (self.minv * Kx))
+        return self.A0 @ x + self.ke * (self.K @ (self.minv * Kx))
 
     def precondition(self, r):
         """P⁻¹ r = τ (M_t + sK)⁻¹ M_L (M_t + sK)⁻¹ r (inverses approximate), or S⁻¹ r (fft)."""

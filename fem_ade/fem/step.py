@@ -41,11 +41,27 @@ import scipy.sparse as sp
 from ..constraints import solve_multipliers
 from ..model import ModelError, Params, ratchet_stabilization, stabilization_coefficients
 from . import forms
-from .solve import StepSolver, _dot
+from .solve import FourierGrid, StepSolver, _dot
 
 
 def _norm(x) -> float:
     return math.sqrt(_dot(x, x))
+
+
+def _woodbury(F, D, low):
+    """x ↦ (D + Σᵢ σᵢ b̂ᵢ b̂ᵢᵀ)⁻¹ x in Fourier space (D diagonal; bᵢᵀx by Parseval)."""
+    if not low:
+        return lambda r: r / D
+    z = [b / D for _, b in low]
+    G = np.array([[F.dot(bi, zj) for zj in z] for _, bi in low])
+    G += np.diag([1.0 / sig for sig, _ in low])
+
+    def solve(r):
+        y = r / D
+        coef = np.linalg.solve(G, [F.dot(b, y) for _, b in low])
+        return y - sum(ci * zi for ci, zi in zip(coef, z, strict=True))
+
+    return solve
 
 
 class MixedStep:
@@ -71,6 +87,11 @@ class MixedStep:
         self.Mt = sp.diags(self.w).tocsr() if mass == "lumped" else ops.M
         # (cells, spacing) of a uniform Q1 grid (the ``fft`` solver), with M_t's kind
         self.fft_grid = None if fft_grid is None else (*fft_grid, mass == "lumped")
+        if solver in ("fft", "auto") and fft_grid is not None:
+            solver = "fft"  # uniform Q1: the direct Fourier path (no PCG)
+        elif solver == "fft":
+            raise ModelError("solver 'fft' needs a uniform tensor mesh with Q1 elements")
+        self.fourier = FourierGrid(*fft_grid) if solver == "fft" else None
         self.solver_opts = {"kind": solver, "rtol": rtol}
         self.stab: tuple[float, float] | None = None
         self.z: tuple[np.ndarray, np.ndarray] | None = None
@@ -96,13 +117,15 @@ class MixedStep:
             self._solvers[key] = StepSolver(
                 self.Mt, self.K, self.w, dt=dt, kappa=p.kappa, eps=p.eps, grid=self.fft_grid,
                 s0=s0, s2=s2, cache=None if stab is None else self._preconditioners,
-                **self.solver_opts)
+                lumped=self.mass == "lumped", **self.solver_opts)
         return self._solvers[key]
 
     def set_dt(self, dt: float, phi, mu, Kphi) -> None:
         """Δt changes the step matrix and its preconditioner (the stabilized scheme's, before
         its first step, at φ⁰'s (s₀, s₂))."""
         self.dt = float(dt)
+        if self.fourier is not None:
+            return  # the direct path builds its symbols per step: they are cheap
         stab = None
         if self.scheme == "stabilized":
             stab = self.stab or stabilization_coefficients(self.params,
@@ -140,10 +163,16 @@ class MixedStep:
     def explicit_rhs(self, phi, mu, Kphi):
         """(⟨Rⁿ, v⟩ as a DOF vector, (A, ΔA, V)) (SPEC §4–§5); only the terms whose effect is
         on."""
+        if self.products == "quadrature":
+            values = self.values(phi, mu, Kphi)
+            return self._explicit_rhs_quadrature(phi, mu, *values), values
+        a, c, values = self.explicit_parts(phi, mu, Kphi)
+        return self.weak(a, c), values
+
+    def explicit_parts(self, phi, mu, Kphi):
+        """(a, c, (A, ΔA, V)) with ⟨Rⁿ, v⟩ = K a + M_t c: the nodal products of every term."""
         p = self.params
         A, dA, V = self.values(phi, mu, Kphi)
-        if self.products == "quadrature":
-            return self._explicit_rhs_quadrature(phi, mu, A, dA, V), (A, dA, V)
         a, c = forms.bending_explicit(phi, mu, kappa=p.kappa, eps=p.eps, C=p.C_eff)
         if dA is not None:
             a2, c2 = forms.area_difference_gradient(phi, mu, p.eps, p.ade_force_coefficient(dA))
@@ -155,7 +184,7 @@ class MixedStep:
             c += c2
         if V is not None:  # slope × ⟨δV/δφ, v⟩ = slope × M_t(½ or s′(φ))
             c += p.volume_slope(V) * forms.volume_gradient(phi, p.localized_volume)
-        return self.weak(a, c), (A, dA, V)
+        return a, c, (A, dA, V)
 
     def _explicit_rhs_quadrature(self, phi, mu, A, dA, V) -> np.ndarray:
         p, basis = self.params, self.basis
@@ -249,6 +278,98 @@ class MixedStep:
 
         a, b, _ = self.ramp.solve(lambda targets: solve_multipliers(measure, *targets))
         return fields(a, b)[0], -a, -b, its
+
+    # -- the direct path of uniform Q1 meshes: the same steps in Fourier space -------------------
+    def fourier_step(self, phi_hat, phi, mu, Kphi):
+        """One step of the scheme from φ̂ⁿ (and its φ, μ, Kφ): (φ̂ⁿ⁺¹, extra columns).
+
+        On a uniform periodic Q1 mesh M_L, M, K are diagonal in Fourier space
+        (:class:`fem_ade.fem.solve.FourierGrid`): the step's S⁻¹ is a division, the rank-one
+        Hessians of the stabilized scheme and the constraint directions enter by Woodbury, so
+        a step costs about as many transforms as the spectral reference's (four for the
+        paper's scheme) and no PCG. The system solved is the same as :meth:`step`'s.
+        """
+        F, p = self.fourier, self.params
+        t0 = time.perf_counter()
+        a, c, (A, dA, V) = self.explicit_parts(phi, mu, Kphi)
+        mt = F.ml if self.mass == "lumped" else F.Mh
+        lumped = self.mass == "lumped"
+        R = F.Kh * F.fwd(a) + mt * F.fwd(c)
+        ke, two = p.kappa * p.eps, 2.0 * p.kappa / p.eps
+        if self.scheme == "paper" and not self.exact:
+            S = F.symbol(mass_factor=1.0 / self.dt, c=-two, ke=ke, lumped=lumped)
+            return (mt * phi_hat / self.dt - R) / S, {"krylov_its": 0,
+                                                      "solve_s": time.perf_counter() - t0}
+        g = (two * F.Kh - ke * F.Kh * F.Kh / F.ml) * phi_hat - R  # −∇E_h(φⁿ)
+        low = []
+        if self.scheme == "stabilized":
+            self.stab = ratchet_stabilization(self.stab,
+                                              stabilization_coefficients(p, A, dA, V))
+            s0, s2 = self.stab
+            D = F.symbol(mass_factor=1.0 / self.dt + s0, c=s2 - two, ke=ke, lumped=lumped)
+            low = self._rank_one_hat(phi_hat, phi, mu, A, dA, V, mt)
+        else:
+            D = F.symbol(mass_factor=1.0 / self.dt, c=-two, ke=ke, lumped=lumped)
+        solve = _woodbury(F, D, low)
+        new = phi_hat + solve(g)
+        extra = {}
+        if self.exact:
+            new, lam_V, lam_A = self._fourier_constrained(phi, phi_hat, new, solve, low, mt)
+            extra = {"lambda_V": lam_V, "lambda_A": lam_A, "ramp": self.ramp.fraction}
+        return new, {"krylov_its": 0, "solve_s": time.perf_counter() - t0, **extra}
+
+    def _volume_hat(self, phi, mt):
+        """⟨δV/δφ, v⟩ in Fourier space: ½M̂_t at k = 0 only, or M̂_t·(s′(φ))^ (localized)."""
+        F = self.fourier
+        c = forms.volume_gradient(phi, self.params.localized_volume)
+        if np.isscalar(c):
+            out = np.zeros(F.Kh.shape, dtype=complex)
+            out.flat[0] = c * F.size * (mt if np.isscalar(mt) else mt.flat[0])
+            return out
+        return mt * F.fwd(c)
+
+    def _area_hat(self, phi_hat, phi, mt):
+        """⟨δA/δφ, v⟩ in Fourier space: s K̂φ̂ + M̂_t ĉ (:func:`forms.area_gradient`)."""
+        s, c = forms.area_gradient(phi, self.params.eps)
+        return s * self.fourier.Kh * phi_hat + mt * self.fourier.fwd(c)
+
+    def _rank_one_hat(self, phi_hat, phi, mu, A, dA, V, mt):
+        """:meth:`rank_one` in Fourier space: [(σ, b̂)]."""
+        p, F = self.params, self.fourier
+        out = []
+        if V is not None and p.volume_curvature > 0:
+            out.append((p.volume_curvature, self._volume_hat(phi, mt)))
+        if A is not None and p.area_curvature > 0:
+            out.append((p.area_curvature, self._area_hat(phi_hat, phi, mt)))
+        if dA is not None and p.ade_modulus > 0:
+            a, c = forms.area_difference_gradient(phi, mu, p.eps, -0.75 * p.D)
+            out.append((p.ade_modulus, F.Kh * F.fwd(a) + mt * F.fwd(c)))
+        return out
+
+    def _fourier_constrained(self, phi, phi_hat, base_h, solve, low, mt):
+        """:meth:`_constrained_update` in Fourier space: (φ̂ⁿ⁺¹, λ_V, λ_A)."""
+        F, p, w = self.fourier, self.params, self.w
+        bV = self._volume_hat(phi, mt)
+        bA = next((b for sig, b in low if sig == p.area_curvature and p.on("area")), None)
+        bA = self._area_hat(phi_hat, phi, mt) if bA is None else bA
+        zh = [solve(bV), solve(bA)]
+        base, Kbase = F.inv(base_h), F.inv(F.Kh * base_h)
+        zs = [F.inv(z) for z in zh]
+        Kz = [F.inv(F.Kh * z) for z in zh]
+        JV = [F.dot(bV, z) for z in zh]
+
+        def fields(a, b):
+            return base + a * zs[0] + b * zs[1], Kbase + a * Kz[0] + b * Kz[1]
+
+        def measure(a, b):
+            u, Ku = fields(a, b)
+            gA = self.area_gradient(u, Ku)
+            gV = [_dot(self.volume_gradient(u), z) for z in zs] if p.localized_volume else JV
+            J = np.array([gV, [_dot(gA, z) for z in zs]])
+            return forms.volume(u, w, p.localized_volume), forms.area(u, Ku, w, p.eps), J
+
+        a, b, _ = self.ramp.solve(lambda targets: solve_multipliers(measure, *targets))
+        return base_h + a * zh[0] + b * zh[1], -a, -b
 
     # -- state ------------------------------------------------------------------------------
     def state(self) -> dict:
