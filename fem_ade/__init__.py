@@ -5,11 +5,19 @@ scene catalogue (:mod:`fem_ade.scenes`), one time loop (:mod:`fem_ade.loop`) and
 folder (:mod:`fem_ade.runs`, whose :func:`simulate` is the Python API behind the CLI).
 """
 
-from .model import EFFECTS, ModelError, Params
-from .runs import resume, simulate
-from .scenes import SCENES, Scene, get_scene, load_scene_file
+import importlib
 
 __version__ = "0.1.0"
 
-__all__ = ["EFFECTS", "ModelError", "Params", "SCENES", "Scene", "get_scene", "load_scene_file",
-           "resume", "simulate", "__version__"]
+#: name -> module: imported on first use, so that ``python -m fem_ade.run`` starts light
+_LAZY = {"EFFECTS": "model", "ModelError": "model", "Params": "model", "SCENES": "scenes",
+         "Scene": "scenes", "get_scene": "scenes", "load_scene_file": "scenes",
+         "resume": "runs", "simulate": "runs"}
+
+__all__ = [*_LAZY, "__version__"]
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module 'fem_ade' has no attribute {name!r}")

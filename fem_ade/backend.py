@@ -145,17 +145,30 @@ class BackendBase:
         if unknown:
             raise ModelError(f"the {cls.name} backend takes no option(s) {sorted(unknown)}")
         params = scene.params.for_constraints(constraints).validate()
-        nodes = cls.check_options(scene, n, **options)
+        scene.validate()
+        if not isinstance(n, int) or isinstance(n, bool) or n < 8:
+            raise ModelError(f"n must be an integer >= 8, got {n}")
+        spacing = cls.check_options(scene, n, **options)
         check_resolution(params, n, dt, allow_underresolved=allow_underresolved,
-                         check_dt=scheme == "paper", nodes_per_cell=nodes or 1,
-                         check_h=nodes is not None)
+                         check_dt=scheme == "paper", spacing=spacing)
+        need, have = cls.memory_bytes(scene, n, **options), physical_memory()
+        if need > 0.8 * have:
+            raise ModelError(f"n = {n} needs about {need / 2**30:.3g} GB of memory with the "
+                             f"{cls.name} backend; this machine has {have / 2**30:.3g} GB")
 
     @classmethod
-    def check_options(cls, scene: Scene, n: int, **options) -> int | None:
-        """Validate the backend's own options (ModelError); return the nodes per cell and
-        direction of the resolution check h = L/(n·nodes) ≤ ε, or None where n does not
-        describe the spacing (a mesh file)."""
-        return 1
+    def memory_bytes(cls, scene: Scene, n: int, **options) -> float:
+        """About how much memory a run needs (bytes): ``bytes_per_dof`` per unknown."""
+        return cls.bytes_per_dof * float(n) ** scene.dim
+
+    #: memory per unknown (measured, with margin: the spectral step's dozen grid arrays)
+    bytes_per_dof = 400.0
+
+    @classmethod
+    def check_options(cls, scene: Scene, n: int, **options) -> float:
+        """Validate the backend's own options (ModelError); return the largest node spacing
+        (the resolution check: it must not exceed ε)."""
+        return scene.params.L / n
 
     def initial_field(self, points: np.ndarray, *, ic: str, perturb: float,
                       seed: int) -> np.ndarray:
@@ -165,6 +178,14 @@ class BackendBase:
     def max_abs_phi(self) -> float:
         m = float(np.max(np.abs(self.phi)))
         return m if math.isfinite(m) else math.nan
+
+
+def physical_memory() -> float:
+    """The machine's memory in bytes."""
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # not POSIX: do not refuse anything
+        return math.inf
 
 
 def fft_workers() -> int:

@@ -44,10 +44,6 @@ import numpy as np
 
 from .model import ModelError
 
-#: initial-condition variants of a catalogue scene: the two readings of the paper's printed
-#: constant c (SPEC §7 erratum), and "seeded", the paper's figure's shape (fem_ade.seeds)
-IC_VARIANTS = ("consistent", "printed", "seeded")
-
 
 # ---------------------------------------------------------------------------------------------
 # geometry helpers (periodic minimum image)

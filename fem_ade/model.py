@@ -96,6 +96,9 @@ class Params:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ModelError(f"{name} must be a positive number, got {value}")
+        if self.L > 1e3:
+            raise ModelError(f"L = {self.L:g}: the box is measured in units of the vesicle's "
+                             "size (the paper's L is 1 or 2); use L <= 1000")
         for name in ("alpha", "beta"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -114,6 +117,10 @@ class Params:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ModelError(f"{name} must be a non-negative penalty, got {value}")
+        for name in ("delta_A0", "C", "kappa_bar"):
+            value = getattr(self, name)
+            if not math.isfinite(value):
+                raise ModelError(f"{name} must be a finite number, got {value}")
         if self.C != 0.0 and not self.on("spontaneous_curvature"):
             raise ModelError(
                 f"C = {self.C} is set but the 'spontaneous_curvature' effect is off; "
@@ -213,13 +220,15 @@ PARAM_FIELDS = {f.name for f in fields(Params)}
 
 
 def reduced_volume(V: float, A: float) -> float:
-    """v = V / (4π/3 (A/4π)^{3/2}): 1 for a sphere."""
-    return V / (4.0 * math.pi / 3.0 * (A / (4.0 * math.pi)) ** 1.5) if A > 0 else math.nan
+    """v = V / (4π/3 (A/4π)^{3/2}): 1 for a sphere (NaN where it is undefined)."""
+    den = 4.0 * math.pi / 3.0 * (A / (4.0 * math.pi)) ** 1.5 if A > 0 else 0.0
+    return V / den if den > 0 else math.nan
 
 
 def reduced_area_difference(dA: float, A: float, D: float) -> float:
-    """Δa = ΔA / (8πD √(A/4π)): 1 for a sphere (ΔA = 8πDR)."""
-    return dA / (8.0 * math.pi * D * math.sqrt(A / (4.0 * math.pi))) if A > 0 else math.nan
+    """Δa = ΔA / (8πD √(A/4π)): 1 for a sphere (ΔA = 8πDR; NaN where it is undefined)."""
+    den = 8.0 * math.pi * D * math.sqrt(A / (4.0 * math.pi)) if A > 0 else 0.0
+    return dA / den if den > 0 else math.nan
 
 
 def max_stable_dt(params: Params) -> float:
@@ -228,16 +237,16 @@ def max_stable_dt(params: Params) -> float:
 
 
 def check_resolution(params: Params, n: int, dt: float, *, allow_underresolved: bool = False,
-                     check_dt: bool = True, nodes_per_cell: int = 1, check_h: bool = True):
+                     check_dt: bool = True, spacing: float | None = None):
     """Check the grid size n and the time step dt against the scene (SPEC §4). Raises ModelError.
 
     ``check_dt=False`` skips the Δt < ε³/κ bound (the stabilized scheme has no such bound).
-    The node spacing is L/(n·nodes_per_cell) (2 for Q2); ``check_h=False`` skips the h ≤ ε
-    test (a mesh read from a file, whose spacing n does not describe).
+    ``spacing``: the largest node spacing of the discretization (default L/n), which must not
+    exceed ε unless ``allow_underresolved``.
     """
-    if not isinstance(n, int) or n < 8:
+    if not isinstance(n, int) or isinstance(n, bool) or n < 8:
         raise ModelError(f"n must be an integer >= 8, got {n}")
-    if not (math.isfinite(dt) and dt > 0):
+    if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
         raise ModelError(f"the time step must be positive, got dt = {dt}")
     limit = max_stable_dt(params)
     if check_dt and dt >= limit:
@@ -245,12 +254,11 @@ def check_resolution(params: Params, n: int, dt: float, *, allow_underresolved: 
             f"dt = {dt:g} >= eps^3/kappa = {limit:g}: the semi-implicit step operator is singular "
             "there (SPEC §4); use a smaller dt or --scheme stabilized"
         )
-    h = params.L / (n * nodes_per_cell)
-    if check_h and h > params.eps and not allow_underresolved:
+    h = params.L / n if spacing is None else spacing
+    if h > params.eps and not allow_underresolved:
         raise ModelError(
             f"grid too coarse for the interface: node spacing {h:.4g} > eps = {params.eps:g}; "
-            f"use n >= {math.ceil(params.L / (params.eps * nodes_per_cell))} "
-            "or --allow-underresolved"
+            f"use a finer grid (n >= {math.ceil(n * h / params.eps)}) or --allow-underresolved"
         )
 
 

@@ -21,16 +21,76 @@ from .model import ModelError
 PACKAGES = ("fem_ade", "numpy", "scipy", "scikit-fem", "pyamg", "meshio", "pyvista", "matplotlib")
 
 
+#: the files a run writes into its folder (``--force`` removes these, and nothing else)
+RUN_FILES = ("run.json", "history.csv", "summary.json", "final.npz", "checkpoint.npz",
+             "phi.xdmf", "phi.h5", "shape.png", "history.png", "shapes.csv", "initial.npz")
+RUN_GLOBS = ("phi-from-*.xdmf", "phi-from-*.h5", "*.tmp", "*.tmp.npz", "*.tmp.png")
+
+
+def run_files(folder: Path) -> list[Path]:
+    """The files of a run that exist in ``folder``."""
+    found = [folder / name for name in RUN_FILES if (folder / name).exists()]
+    for pattern in RUN_GLOBS:
+        found += sorted(folder.glob(pattern))
+    return found
+
+
 def check_out_dir(path: str | Path, *, force: bool = False) -> Path:
-    """Refuse an existing non-empty folder unless ``force``; create nothing yet."""
+    """Check that ``path`` can take a run, creating and changing nothing (ModelError): an
+    existing folder must be empty (or, with ``force``, hold a run whose files are files), a
+    new one must be creatable in a writable folder."""
+    text = str(path)
+    if not text.strip():
+        raise ModelError("--out needs a folder name")
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise ModelError(f"--out {path} exists and is not a folder")
-    if path.is_dir() and any(path.iterdir()) and not force:
-        raise ModelError(
-            f"output folder {path} exists and is not empty; use --force or another --out"
-        )
+    if path.is_dir():
+        if any(path.iterdir()) and not force:
+            raise ModelError(
+                f"output folder {path} exists and is not empty; use --force or another --out")
+        odd = [p.name for p in run_files(path) if not p.is_file()]
+        if odd:
+            raise ModelError(f"--out {path}: {', '.join(odd)} should be files of a run but are "
+                             "not; remove them first")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise ModelError(f"--out {path} is not writable")
+        return path
+    parent = path.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ModelError(f"--out {path}: {parent} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ModelError(f"--out {path}: cannot create it, {parent} is not writable")
     return path
+
+
+def prepare_out_dir(path: Path, *, force: bool = False, fresh: bool = False) -> None:
+    """Create the run folder (``fresh``: it must not exist yet: a default folder is never
+    shared) and prove it writable; with ``force``, remove the previous run's files (and
+    nothing else). ModelError, with anything created here removed again, if that fails."""
+    created = []
+    try:
+        for folder in reversed([path, *path.parents]):
+            if not folder.exists():
+                folder.mkdir()
+                created.append(folder)
+        if fresh and not created:
+            raise ModelError(f"output folder {path} appeared meanwhile; run again")
+        probe = path / f".write-test-{os.getpid()}"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as err:
+        for folder in reversed(created):
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
+        raise ModelError(f"--out {path}: cannot write there ({err.strerror or err})") from None
+    if force:
+        for p in run_files(path):
+            p.unlink()
 
 
 def package_versions() -> dict:

@@ -15,6 +15,10 @@ SCHEMES = {
     "stabilized": "linear, one solve per step, energy-stable at >= 100x the paper's dt",
 }
 
+#: initial-condition variants of a catalogue scene: the two readings of the paper's printed
+#: constant c (SPEC §7 erratum), and "seeded", the paper's figure's shape (fem_ade.seeds)
+IC_VARIANTS = ("consistent", "printed", "seeded")
+
 #: how V = α and A = β are enforced
 CONSTRAINTS = {
     "penalty": "the paper's penalties M1 (V - alpha)^2 + M2 (A - beta)^2",

@@ -280,8 +280,42 @@ def render_shape(phi: np.ndarray, L: float, path: str | Path, *, title: str | No
                  fontsize=14 if first else 11, fontweight="bold" if first else "normal",
                  color="black" if first else "#333333")
     path = Path(path)
-    fig.savefig(path, dpi=dpi)
+    _save(fig, path, dpi)
     return path
+
+
+def _save(fig, path, dpi) -> Path:
+    """Write the figure to ``path`` atomically (write, then rename): an interrupted picture
+    never replaces a whole one."""
+    path = Path(path)
+    tmp = path.with_name(path.stem + ".tmp.png")
+    fig.savefig(tmp, dpi=dpi)
+    os.replace(tmp, path)
+    return path
+
+
+def render_field_2d(phi: np.ndarray, L: float, path: str | Path, *, title: str = "",
+                    subtitle: str = "") -> Path:
+    """shape.png of a 2D run: φ over the periodic square with its zero contour."""
+    from matplotlib.figure import Figure
+
+    phi = np.asarray(phi, dtype=float)
+    n = phi.shape[0]
+    fig = Figure(figsize=(7.0, 6.6), dpi=100)
+    ax = fig.subplots()
+    grid = np.pad(phi, ((0, 1), (0, 1)), mode="wrap")
+    xs = np.linspace(0.0, L, n + 1)
+    vmax = max(1.0, float(np.max(np.abs(grid))))
+    pcm = ax.pcolormesh(xs, xs, grid.T, shading="gouraud", cmap="RdBu_r", vmin=-vmax,
+                        vmax=vmax, rasterized=True)
+    if _crosses(grid):
+        ax.contour(xs, xs, grid.T, levels=[0.0], colors="k", linewidths=1.6)
+    ax.set_aspect("equal")
+    ax.set(xlabel="x", ylabel="y", title=subtitle or "φ (black: φ = 0)")
+    fig.colorbar(pcm, ax=ax, fraction=0.046, pad=0.03).set_label("φ (+1 inside, −1 outside)")
+    if title:
+        fig.suptitle(title, fontsize=12, fontweight="bold")
+    return _save(fig, path, 100)
 
 
 def _crosses(a: np.ndarray) -> bool:
@@ -380,7 +414,7 @@ def render_history(history, path: str | Path, params: Params, *,
         fig.suptitle(title, fontsize=13, fontweight="bold")
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=100)
+    _save(fig, path, 100)
     return path
 
 
@@ -415,10 +449,9 @@ def _load_run(out: Path) -> tuple[np.ndarray, float, dict]:
     except (OSError, ValueError) as err:
         raise _BadInput(f"{out / 'final.npz'} cannot be read ({err})") from None
     n = x.shape[0] if x.ndim == 1 else -1
-    if phi.ndim != 3 or phi.shape != (n, n, n):
+    if phi.ndim not in (2, 3) or phi.shape != (n,) * phi.ndim:
         raise _BadInput(f"{out / 'final.npz'}: phi of shape {phi.shape} with x of shape "
-                        f"{x.shape} is not a grid field (n, n, n); fields on FEM mesh nodes "
-                        "are not supported yet")
+                        f"{x.shape} is not a field on a uniform grid (n, n[, n])")
     if not np.all(np.isfinite(phi)):
         raise _BadInput(f"{out / 'final.npz'}: phi has non-finite values")
     return phi, L, summary
@@ -472,8 +505,10 @@ def render_run(out: str | Path, *, view: tuple[float, float] = DEFAULT_VIEW,
     except (KeyError, TypeError, ValueError, IndexError) as err:
         raise _BadInput(f"{out} is not a complete run folder ({err})") from None
     final = summary.get("final") or {}
-    desc = describe(phi, L, V=final.get("V"), A=final.get("A"),
-                    dA=final.get("dA") if params.on("ade") else None, D=params.D)
+    desc = None
+    if phi.ndim == 3:
+        desc = describe(phi, L, V=final.get("V"), A=final.get("A"),
+                        dA=final.get("dA") if params.on("ade") else None, D=params.D)
     return draw_run(out, phi, params, history, desc, label=run_label(summary, phi.shape[0]),
                     view=view, size=size, engine=engine, quiet=quiet)
 
@@ -489,14 +524,18 @@ def run_label(summary: dict, n_grid: int) -> str:
     return " — ".join(s for s in (head, when, flag) if s)
 
 
-def draw_run(out: str | Path, phi: np.ndarray, params: Params, history, descriptors: dict, *,
-             label: str, surface: Surface | None = None,
+def draw_run(out: str | Path, phi: np.ndarray, params: Params, history,
+             descriptors: dict | None, *, label: str, surface: Surface | None = None,
              view: tuple[float, float] = DEFAULT_VIEW, size: tuple[int, int] = (1200, 600),
-             engine: str = "auto", quiet: bool = True) -> dict:
+             engine: str = "auto", quiet: bool = True) -> dict | None:
     """Write ``OUT/shape.png`` and ``OUT/history.png`` from what a run has in memory: φ on the
     uniform grid, the parameters, the history columns and the descriptors (and the surface,
-    if extracted already). Returns the descriptors."""
+    if extracted already; 2D runs: the field and its zero contour). Returns the descriptors."""
     out = Path(out)
+    if np.ndim(phi) == 2:
+        render_field_2d(phi, params.L, out / "shape.png", title=label)
+        render_history(history, out / "history.png", params, title=label)
+        return descriptors
     subtitle = summary_line(descriptors, given="diffuse, from the diagnostics")
     v0, m0 = params.reduced_targets()
     ade = params.on("ade")

@@ -3,7 +3,11 @@
 
 Exit codes: 0 finished (completed, steady, or max-steps reached), 2 bad input (one line on
 stderr, nothing written), 3 diverged (diagnosis printed, last finite state saved),
-130 interrupted.
+130 interrupted (SIGINT or SIGTERM, at any moment: one line, and the run folder, if one was
+started, consistent — with a checkpoint to resume from once the loop has begun).
+
+The heavy modules are imported inside :func:`main`, after the signal handlers are set, so
+that an interrupt during start-up is one line too.
 """
 
 from __future__ import annotations
@@ -11,16 +15,13 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-import time
 from pathlib import Path
 
-from .initial import IC_VARIANTS
-from .loop import EXIT_BAD_INPUT
-from .model import ModelError
-from .output import read_json
-from .registry import BACKENDS, CONSTRAINTS, SCHEMES, VOLUMES
-from .runs import resume, simulate, verdict
-from .scenes import PAPER_SCENES, SCENES, TEACHING_SCENES, resolve_scene, scene_from_mapping
+from .registry import BACKENDS, CONSTRAINTS, IC_VARIANTS, SCHEMES, VOLUMES
+
+EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
+#: the options --resume takes; every other one is stored in the run folder
+RESUME_OPTIONS = {"resume", "steps", "quiet"}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -47,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     stop.add_argument("--steps", type=int, help="number of steps (default: the scene's, 200)")
     stop.add_argument("--until-steady", type=float, metavar="TOL",
                       help="stop when |dE|/(every*|E|) over a record interval < TOL")
-    p.add_argument("--max-steps", type=int, default=100_000,
+    p.add_argument("--max-steps", type=int, default=None,
                    help="cap for --until-steady (default 100000)")
     p.add_argument("--every", type=int, default=10, help="record every K steps (default 10)")
     p.add_argument("--ic", choices=IC_VARIANTS, default="consistent",
@@ -85,7 +86,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "volume, axes ratios, necks, dimple) every K steps in OUT/shapes.csv")
     p.add_argument("--no-render", action="store_true",
                    help="skip OUT/shape.png and OUT/history.png")
-    p.add_argument("--out", help="output folder (default: runs/SCENE-BACKEND-TIME)")
+    p.add_argument("--out", help="output folder (default: runs/SCENE-BACKEND-TIME-XXXX, a new "
+                                 "folder)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="check every input, print what would run, write nothing")
     p.add_argument("--force", action="store_true", help="write into a non-empty --out folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--allow-underresolved", action="store_true",
@@ -101,6 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def list_scenes() -> str:
+    from .scenes import PAPER_SCENES, TEACHING_SCENES
+
     lines = ["paper scenes (SPEC §7):"]
     for s in PAPER_SCENES.values():
         lines.append(f"  {s.name:16s} {s.figure:9s} eps={s.params.eps:<5g} dt={s.dt:<6g} "
@@ -112,57 +118,96 @@ def list_scenes() -> str:
     return "\n".join(lines)
 
 
+def _error(message: str) -> int:
+    print(f"fem_ade.run: error: {message}", file=sys.stderr)
+    return EXIT_BAD_INPUT
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        print("fem_ade.run: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def given_options(argv, parser) -> set[str]:
+    """The options the user typed (their ``dest`` names), whatever their values."""
+    given = set()
+    for action in parser._actions:
+        for opt in action.option_strings:
+            if any(a == opt or a.startswith(opt + "=") for a in argv):
+                given.add(action.dest)
+    return given
+
+
+def _main(argv) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
     if args.list:
         print(list_scenes())
         return 0
-    signal.signal(signal.SIGTERM, _interrupt)
+    from .model import ModelError
+    from .runs import default_out, resume, simulate
+
+    given = given_options(sys.argv[1:] if argv is None else argv, parser)
     if args.resume is not None:
         if args.scene is not None:
-            print("fem_ade.run: error: --resume DIR takes no scene (it is stored in DIR)",
-                  file=sys.stderr)
-            return EXIT_BAD_INPUT
+            return _error("--resume DIR takes no scene (it is stored in DIR)")
+        extra = sorted(given - RESUME_OPTIONS)
+        if extra:
+            return _error(f"--resume continues with the run's own options; it takes only "
+                          f"--steps and --quiet, not --{', --'.join(extra).replace('_', '-')}")
         try:
-            result = resume(args.resume, steps=args.steps, quiet=args.quiet)
-            summary = read_json(Path(args.resume) / "run.json")
-        except (ModelError, FileNotFoundError) as err:
-            print(f"fem_ade.run: error: {err}", file=sys.stderr)
-            return EXIT_BAD_INPUT
-        return _report(scene_from_mapping(summary["scene"]), summary["backend"], result,
-                       args.resume)
+            result, scene, config = resume(args.resume, steps=args.steps, quiet=args.quiet,
+                                           with_config=True)
+        except ModelError as err:
+            return _error(str(err))
+        return _report(scene, config["backend"], result, args.resume)
     if args.scene is None:
-        print(f"fem_ade.run: error: give a scene ({', '.join(SCENES)}) or a .toml file",
-              file=sys.stderr)
-        return EXIT_BAD_INPUT
+        from .scenes import SCENES
+
+        return _error(f"give a scene ({', '.join(SCENES)}) or a .toml file")
+    if args.max_steps is not None and args.until_steady is None:
+        return _error("--max-steps caps --until-steady; with --steps it would be ignored")
+    if args.out == "":
+        return _error("--out needs a folder name")
     try:
+        from .scenes import resolve_scene
+
         scene = resolve_scene(args.scene)
         if args.volume is not None:
             scene = scene.with_(volume_functional=args.volume)
-        out = args.out or (Path("runs") / f"{scene.name}-{args.backend}-"
-                           f"{time.strftime('%Y%m%d-%H%M%S')}")
         options = backend_options(args)
+        if args.n is not None and options.get("mesh") and "." in Path(options["mesh"]).name:
+            raise ModelError("--n does not apply to --mesh FILE: the file sets the resolution")
+        out = args.out or default_out(scene.name, args.backend)
         result = simulate(
             scene, backend=args.backend, n=args.n, dt=args.dt, steps=args.steps,
-            until_steady=args.until_steady, max_steps=args.max_steps, every=args.every,
-            ic=args.ic, perturb=args.perturb, seed=args.seed, phi0=args.phi0, out=out,
-            force=args.force,
+            until_steady=args.until_steady,
+            max_steps=100_000 if args.max_steps is None else args.max_steps,
+            every=args.every, ic=args.ic, perturb=args.perturb, seed=args.seed,
+            phi0=args.phi0, out=out, force=args.force, fresh=not args.out,
             quiet=args.quiet, allow_underresolved=args.allow_underresolved,
             backend_options=options, scheme=args.scheme, constraints=args.constraints,
             adaptive=args.adaptive, accelerate=args.accelerate,
             checkpoint_every=args.checkpoint_every, save_every=args.save_every,
-            shape_every=args.shape_every,
-            render=not args.no_render,
+            shape_every=args.shape_every, render=not args.no_render, dry_run=args.dry_run,
         )
     except ModelError as err:
-        print(f"fem_ade.run: error: {err}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return _error(str(err))
+    if args.dry_run:
+        print(f"fem_ade.run: would run {result}")
+        return 0
     return _report(scene, args.backend, result, out)
 
 
 def backend_options(args) -> dict:
     """The chosen backend's options that were given; an option of another backend is an
     error (it would be ignored)."""
+    from .model import ModelError
+
     options = {}
     for spec in BACKENDS.values():
         for o in spec.options:
@@ -180,6 +225,8 @@ def _interrupt(signum, frame):
 
 
 def _report(scene, backend: str, result, out) -> int:
+    from .runs import verdict
+
     f, p = result.final, scene.params
     stream = sys.stderr if result.exit_code else sys.stdout
     print(f"{scene.name} [{backend}]: {result.message}", file=stream)

@@ -30,6 +30,7 @@ from .output import (
     HistoryWriter,
     check_out_dir,
     package_versions,
+    prepare_out_dir,
     read_json,
     truncate_history,
     write_fields,
@@ -88,7 +89,9 @@ def simulate(
     quiet: bool = True,
     allow_underresolved: bool = False,
     backend_options: dict | None = None,
-) -> RunResult:
+    dry_run: bool = False,
+    fresh: bool = False,
+) -> RunResult | str:
     """Run ``scene`` with ``backend`` and, if ``out`` is given, write its run folder there.
 
     ``phi0``: start from this field instead of the scene's initial condition: an array on a
@@ -103,6 +106,12 @@ def simulate(
     ``shape_every=K`` records the shape descriptors every K steps (and at the start) in
     ``OUT/shapes.csv`` and in the result's ``shapes`` (a transient shows as a label that comes
     and goes); ``monitor(backend, row)`` (Python only) is then called with each row.
+
+    Every input is checked first (ModelError, nothing created): the numbers, the scene, the
+    backend's options, the output folder, and the initial field (finite, with an inside).
+    Then the folder is made (``fresh``: a new folder, as the CLI's default) and, with
+    ``force``, the previous run's files in it are removed. ``dry_run``: check, then return a
+    one-line description instead of running.
     """
     n = scene.n if n is None else n
     dt = scene.dt if dt is None else dt
@@ -136,10 +145,6 @@ def simulate(
         raise ModelError("--accelerate and --adaptive do not go together (momentum needs a "
                          "fixed step map)")
     out = check_out_dir(out, force=force) if out is not None else None
-    if out is not None and initial is not None:  # an array start is kept with the run
-        out.mkdir(parents=True, exist_ok=True)
-        write_fields(out / "initial.npz", {"phi": initial})
-        scene = scene.with_(ic=FieldIC(path=str((out / "initial.npz").resolve()), grid=initial))
     config = {"scene": scene_to_mapping(scene) if out is not None else None,
               "backend": backend, "n": n, "dt": dt,
               "steps": steps, "until_steady": until_steady, "max_steps": max_steps,
@@ -147,7 +152,49 @@ def simulate(
               "constraints": constraints, "adaptive": adaptive, "accelerate": accelerate,
               "checkpoint_every": checkpoint_every, "save_every": save_every,
               "shape_every": shape_every, "render": render, "backend_options": options}
-    return _execute(out, scene, config, quiet=quiet, monitor=monitor)
+    be = build_backend(scene, config)  # checks the initial field, writes nothing
+    if dry_run:
+        info = be.info()
+        return (f"{scene.name} with the {backend} backend ({info.get('element', '')} "
+                f"n = {n}, {scheme} scheme, {constraints} constraints, dt = {dt:g}, "
+                f"{steps if steps is not None else f'until steady {until_steady:g}'} steps)"
+                + (f" into {out}" if out is not None else ""))
+    if out is not None:
+        prepare_out_dir(out, force=force, fresh=fresh)
+        if initial is not None:  # an array start is kept with the run
+            write_fields(out / "initial.npz", {"phi": initial})
+            scene = scene.with_(ic=FieldIC(path=str((out / "initial.npz").resolve()),
+                                           grid=initial))
+        config["scene"] = scene_to_mapping(scene)
+    return _execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)
+
+
+def build_backend(scene: Scene, config: dict, state: dict | None = None) -> Backend:
+    """The run's backend (its initial field checked: finite, with an inside), or from a
+    checkpoint's ``state``."""
+    be = make_backend(config["backend"], scene, n=config["n"], ic=config["ic"],
+                      perturb=config["perturb"], seed=config["seed"], scheme=config["scheme"],
+                      constraints=config["constraints"], start_state=state,
+                      **config["backend_options"])
+    phi = be.fields()["phi"]
+    if not np.all(np.isfinite(phi)):
+        raise ModelError("the initial field is not finite" if state is None else
+                         "the checkpoint's field is not finite")
+    if state is None and np.count_nonzero(phi > 0) < 2**scene.dim:
+        raise ModelError(f"the initial field has no inside (phi > 0 at fewer than "
+                         f"{2**scene.dim} nodes): the scene's shape is smaller than the grid "
+                         f"resolves, or does not fit its box (L = {scene.params.L})")
+    return be
+
+
+def default_out(scene_name: str, backend: str) -> Path:
+    """A new folder name under runs/: the scene, the backend, the time and a random suffix
+    (two runs started in the same second never share one; the folder is made fresh)."""
+    import secrets
+    import time
+
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    return Path("runs") / f"{scene_name}-{backend}-{stamp}-{secrets.token_hex(2)}"
 
 
 def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_every=None,
@@ -167,48 +214,94 @@ def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_ever
         raise ModelError(f"--until-steady must be a positive number, got {until_steady}")
 
 
-def resume(out: str | Path, *, steps: int | None = None, quiet: bool = True) -> RunResult:
+def resume(out: str | Path, *, steps: int | None = None, quiet: bool = True,
+           with_config: bool = False):
     """Continue the run in ``out`` from its checkpoint up to step ``steps`` (default: as before).
 
-    The continued run is bit for bit the uninterrupted one.
+    The continued run is bit for bit the uninterrupted one. The run folder and its
+    checkpoint are checked first (ModelError, nothing changed): readable, complete, finite,
+    and the checkpoint of this very run (its scene, backend, resolution, options, scheme,
+    constraints and parameters). ``with_config``: return (result, scene, config).
     """
     out = Path(out)
     if not (out / "run.json").is_file() or not (out / "checkpoint.npz").is_file():
         raise ModelError(f"cannot resume {out}: it has no run.json and checkpoint.npz "
                          "(run with --checkpoint-every K, or interrupt with Ctrl-C)")
-    config = read_json(out / "run.json")
+    try:
+        config = read_json(out / "run.json")
+        scene = scene_from_mapping(config["scene"], where=str(out / "run.json"))
+        total_key = "steps" if config["until_steady"] is None else "max_steps"
+        config[total_key]  # noqa: B018 (a KeyError here is a malformed run.json)
+    except (ValueError, KeyError, TypeError, AttributeError) as err:
+        raise ModelError(f"cannot resume {out}: run.json is not a run's ({err!r})") from None
     if steps is not None:
-        if config["until_steady"] is not None:
-            config["max_steps"] = steps
-        else:
-            config["steps"] = steps
-    scene = scene_from_mapping(config["scene"], where=str(out / "run.json"))
-    state, ls = read_checkpoint(out)
-    total = config["steps"] if config["until_steady"] is None else config["max_steps"]
-    if total < ls.k:
-        raise ModelError(f"the checkpoint is at step {ls.k}, past --steps {total}")
-    return _execute(out, scene, config, quiet=quiet, start=(state, ls))
+        check_loop_options(steps=steps, until_steady=None, max_steps=1, every=1)
+        config[total_key] = steps
+    state, ls, identity = read_checkpoint(out)
+    if identity != run_identity(scene, config):
+        raise ModelError(f"cannot resume {out}: its checkpoint.npz belongs to another run "
+                         f"({_identity_text(identity)}; run.json says "
+                         f"{_identity_text(run_identity(scene, config))})")
+    if config[total_key] < ls.k:
+        raise ModelError(f"the checkpoint is at step {ls.k}, past --steps {config[total_key]}")
+    be = build_backend(scene, config, state)
+    result = _execute(out, scene, config, quiet=quiet, start=(state, ls), be=be)
+    return (result, scene, config) if with_config else result
+
+
+def run_identity(scene: Scene, config: dict) -> dict:
+    """What a checkpoint must match to be resumed: scene, backend, resolution, options,
+    scheme, constraints and a hash of the parameters."""
+    import hashlib
+
+    params = json.dumps(scene.params.as_dict(), sort_keys=True, default=str)
+    return {"scene": scene.name, "backend": config["backend"], "n": config["n"],
+            "options": config["backend_options"], "scheme": config["scheme"],
+            "constraints": config["constraints"],
+            "params": hashlib.sha256(params.encode()).hexdigest()[:16]}
+
+
+def _identity_text(identity: dict | None) -> str:
+    if not identity:
+        return "no identity"
+    return (f"scene {identity['scene']}, {identity['backend']} n = {identity['n']}, "
+            f"{identity['scheme']}, {identity['constraints']}")
 
 
 # ---------------------------------------------------------------------------------------
 # the run folder
 # ---------------------------------------------------------------------------------------
-def write_checkpoint(out: Path, backend: Backend, ls: LoopState) -> None:
+def write_checkpoint(out: Path, backend: Backend, ls: LoopState, identity: dict) -> None:
     """OUT/checkpoint.npz: the backend's state and the loop's (with momentum, its previous
-    iterate), atomically."""
+    iterate) and whose run it is, atomically."""
     arrays = {f"state__{k}": v for k, v in backend.state().items()}
     arrays.update({f"anchor__{k}": v for k, v in (ls.anchor or {}).items()})
-    write_fields(out / "checkpoint.npz", arrays, loop=json.dumps(ls.to_json()))
+    write_fields(out / "checkpoint.npz", arrays, loop=json.dumps(ls.to_json()),
+                 identity=json.dumps(identity))
 
 
-def read_checkpoint(out: Path) -> tuple[dict, LoopState]:
-    with np.load(out / "checkpoint.npz") as z:
-        def part(prefix):
-            return {k[len(prefix):]: z[k] for k in z.files if k.startswith(prefix)}
+def read_checkpoint(out: Path) -> tuple[dict, LoopState, dict | None]:
+    """(backend state, loop state, identity) of OUT/checkpoint.npz; ModelError if it is
+    unreadable, incomplete or not finite."""
+    path = out / "checkpoint.npz"
+    try:
+        with np.load(path) as z:
+            def part(prefix):
+                return {k[len(prefix):]: np.array(z[k]) for k in z.files
+                        if k.startswith(prefix)}
 
-        state, anchor = part("state__"), part("anchor__")
-        ls = LoopState(**json.loads(str(z["loop"])), anchor=anchor or None)
-    return state, ls
+            state, anchor = part("state__"), part("anchor__")
+            ls = LoopState(**json.loads(str(z["loop"])), anchor=anchor or None)
+            identity = json.loads(str(z["identity"])) if "identity" in z.files else None
+    except Exception as err:  # noqa: BLE001 (numpy raises many kinds for a broken file)
+        raise ModelError(f"cannot resume {out}: checkpoint.npz is unreadable or incomplete "
+                         f"({type(err).__name__}: {err})") from None
+    if not state:
+        raise ModelError(f"cannot resume {out}: checkpoint.npz holds no state")
+    for name, value in {**state, **anchor}.items():
+        if np.issubdtype(value.dtype, np.number) and not np.all(np.isfinite(value)):
+            raise ModelError(f"cannot resume {out}: the checkpoint's {name} is not finite")
+    return state, ls, identity
 
 
 class _Series:
@@ -266,14 +359,10 @@ class _Shapes:
             self.file.close()
 
 
-def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
+def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool, be: Backend,
              start: tuple[dict, LoopState] | None = None, monitor=None) -> RunResult:
-    """Build the backend from ``config`` and run it; the one place simulate/resume share."""
-    state, start_ls = start if start is not None else (None, None)
-    be = make_backend(config["backend"], scene, n=config["n"], ic=config["ic"],
-                      perturb=config["perturb"], seed=config["seed"], scheme=config["scheme"],
-                      constraints=config["constraints"], start_state=state,
-                      **config["backend_options"])
+    """Run the backend ``be`` as ``config`` says; the one place simulate/resume share."""
+    start_ls = start[1] if start is not None else None
     adaptive = AdaptiveDt(**config["adaptive"]) if config["adaptive"] else None
     columns = HISTORY_COLUMNS + tuple(be.extra_columns) + (("dt",) if adaptive else ())
     writer = series = None
@@ -289,6 +378,7 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
         # the ParaView series: the start, every save_every steps, the end
         name = "phi.xdmf" if start is None else f"phi-from-{start_ls.k}.xdmf"
         series = _Series(out / name, be)
+    identity = run_identity(scene, config)
     observers = [(config["save_every"], series.save)] if series else []
     shapes = None
     if config.get("shape_every"):
@@ -299,7 +389,7 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool,
             be, dt=config["dt"], steps=config["steps"], until_steady=config["until_steady"],
             max_steps=config["max_steps"], every=config["every"], quiet=quiet, history=writer,
             label=scene.name, adaptive=adaptive, checkpoint_every=config["checkpoint_every"],
-            on_checkpoint=(lambda ls: write_checkpoint(out, be, ls)) if out else None,
+            on_checkpoint=(lambda ls: write_checkpoint(out, be, ls, identity)) if out else None,
             observers=observers, start=start_ls, accelerate=config.get("accelerate", False))
     finally:
         if writer is not None:
@@ -340,8 +430,9 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict, series, gri
     if np.shape(fields["phi"]) != phi_grid.shape:  # the field is not on the uniform grid
         fields["phi_grid"] = phi_grid
         fields["x"] = np.arange(phi_grid.shape[0]) * (be.scene.params.L / phi_grid.shape[0])
-    write_fields(out / "final.npz", fields, step=result.steps, t=result.t, dt=result.dt,
-                 status=result.status)
+    if np.all(np.isfinite(fields["phi"])):  # a non-finite field never replaces a good one
+        write_fields(out / "final.npz", fields, step=result.steps, t=result.t, dt=result.dt,
+                     status=result.status)
     if series is not None:
         if series.last_step != result.steps:
             series.save(LoopState(k=result.steps, t=result.t))
@@ -370,7 +461,7 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict, series, gri
         "versions": package_versions(),
     }
     write_json_atomic(out / "summary.json", summary)
-    if config.get("render", True) and descriptors is not None and rows:
+    if config.get("render", True) and np.all(np.isfinite(phi_grid)) and rows:
         from .render import draw_run, run_label
 
         columns = {c: np.array([float(r.get(c, 0.0)) for r in rows]) for c in rows[0]}

@@ -14,14 +14,16 @@ initial volume match α; the printed one (``ic="printed"``) is kept as a hard ca
 from __future__ import annotations
 
 import math
+import re
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from .initial import IC_VARIANTS, Ellipsoid, Shape, Sphere, ic_from_mapping
+from .initial import Ellipsoid, Shape, Sphere, ic_from_mapping
 from .model import EFFECTS, PARAM_FIELDS, ModelError, Params
+from .registry import IC_VARIANTS
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -90,6 +92,50 @@ class Scene:
         if perturb:
             s = s + perturb * scale * smooth_perturbation(points, self.params.L, seed)
         return np.tanh(s / w)
+
+    def validate(self) -> Scene:
+        """See :meth:`_validate`; numbers too large or small to compute with are refused too."""
+        try:
+            return self._validate()
+        except (OverflowError, ZeroDivisionError, ValueError) as err:
+            if isinstance(err, ModelError):
+                raise
+            raise ModelError(f"the parameters of scene {self.name} are out of range "
+                             f"({err})") from None
+
+    def _validate(self) -> Scene:
+        """ModelError (one line) unless the parameters are usable and fit the box: α below
+        the box's volume, a membrane of area β that fits it (β·ε < |Ω|), α and β that a
+        closed surface can have (reduced volume ≤ 1.5: a sphere has 1), ε well below L."""
+        p = self.params.validate()
+        if self.dim not in (2, 3):
+            raise ModelError(f"dim must be 2 or 3, got {self.dim}")
+        if not (isinstance(self.steps, int) and self.steps >= 0):
+            raise ModelError(f"steps must be an integer >= 0, got {self.steps}")
+        if not (isinstance(self.n, int) and self.n >= 8):
+            raise ModelError(f"n must be an integer >= 8, got {self.n}")
+        if not (math.isfinite(self.dt) and self.dt > 0):
+            raise ModelError(f"dt must be a positive number, got {self.dt}")
+        box = p.L**self.dim
+        if not p.alpha < box:
+            raise ModelError(f"alpha = {p.alpha:g} is not below the box's volume "
+                             f"L^{self.dim} = {box:g}")
+        if not p.beta * p.eps < box:
+            raise ModelError(f"beta = {p.beta:g} is more membrane than the box holds "
+                             f"(beta * eps must be below L^{self.dim} = {box:g})")
+        if not p.eps <= p.L / 8:
+            raise ModelError(f"eps = {p.eps:g} is too wide for the box (L = {p.L:g}; eps <= L/8)")
+        # reduced volume in logarithms (no overflow or underflow for extreme α, β)
+        if self.dim == 3:
+            log_v0 = (math.log(p.alpha) - math.log(4.0 * math.pi / 3.0)
+                      - 1.5 * (math.log(p.beta) - math.log(4.0 * math.pi)))
+        else:
+            log_v0 = math.log(4.0 * math.pi) + math.log(p.alpha) - 2.0 * math.log(p.beta)
+        v0 = math.exp(min(log_v0, 700.0))
+        if v0 > 1.5:
+            raise ModelError(f"alpha = {p.alpha:g} is too much volume for the area beta = "
+                             f"{p.beta:g}: reduced volume {v0:.3g} > 1 (a sphere has 1)")
+        return self
 
     def with_(self, **changes) -> Scene:
         """A copy with scene fields or parameters changed (parameter names go to Params)."""
@@ -251,6 +297,10 @@ def load_scene_file(path: str | Path) -> Scene:
         data = tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise ModelError(f"scene file not found: {path}") from None
+    except IsADirectoryError:
+        raise ModelError(f"scene file {path} is a folder") from None
+    except OSError as err:
+        raise ModelError(f"cannot read scene file {path}: {err.strerror or err}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise ModelError(f"malformed TOML in {path}: {err}") from None
     return scene_from_mapping(data, default_name=path.stem, where=str(path))
@@ -316,9 +366,11 @@ def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = 
         scene_kw.setdefault("name", default_name)
         scene = Scene(params=params, ic=ic, **scene_kw)
 
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", scene.name):
+        raise ModelError(f"name must be a plain file name (letters, digits, . _ -), got "
+                         f"{scene.name!r}")
     scene.ic.check(scene.dim)
-    scene.params.validate()
-    return scene
+    return scene.validate()
 
 
 def scene_to_mapping(scene: Scene) -> dict:

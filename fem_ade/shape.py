@@ -539,6 +539,8 @@ def body_geometry(S: Surface) -> dict | None:
     idx = np.argwhere(mask)
     if any(idx[:, a].min() == 0 and idx[:, a].max() == S.phi.shape[a] - 1 for a in range(3)):
         return None  # it spans an axis of the box: no finite body to measure
+    if len(idx) < 27:
+        return None  # a few grid cells: too small to measure
     X = S.origin + idx * S.h
     c = X.mean(axis=0)
     Y = X - c
@@ -565,7 +567,7 @@ def body_geometry(S: Surface) -> dict | None:
     # thickness across the short axis along lines parallel to it, as a function of their
     # distance ρ from the centroid (8 directions, φ by trilinear interpolation)
     t = np.arange(-axes[0] - 2 * h, axes[0] + 2 * h, 0.5 * h)
-    rhos = np.arange(0.0, axes[0], h)
+    rhos = np.arange(0.0, max(axes[0], h), h)
     angles = np.linspace(0.0, 2.0 * np.pi, 8, endpoint=False)
     offsets = (np.cos(angles)[:, None] * vec[:, 0] + np.sin(angles)[:, None] * vec[:, 1])
     pts = (c + rhos[:, None, None, None] * offsets[None, :, None, :]

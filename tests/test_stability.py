@@ -159,3 +159,21 @@ def test_fem_variants_run_with_decaying_energy(options):
     assert res.status == "completed", res.message
     assert _decays(res.history)
     assert be.max_abs_phi() <= 1.2
+
+
+@pytest.mark.parametrize("name, scheme, dt, accelerate", [
+    ("sphere-bending", "paper", 0.1 * 0.04**3, False), ("discocyte", "stabilized", 5e-5, True)])
+def test_fem_direct_path_keeps_its_spectrum_clean(name, scheme, dt, accelerate):
+    """The FEM's direct Fourier path keeps φ̂ as its state: the planes irfftn cannot see stay
+    Hermitian. Without the projection (measured): 1.4e-1 after these 300 momentum steps, and
+    the paper's scheme, which grows them by 1/(1 − Δtκ/ε³) per step, diverged at step 9681 of
+    the 64³ discocyte; at Δt = ε³/10 here that growth is 1.11 per step."""
+    from fem_ade.backend import make_backend
+
+    scene = get_scene(name)
+    be = make_backend("fem", scene, n=16, solver="fft", scheme=scheme)
+    run_loop(be, dt=dt, steps=300, every=100, accelerate=accelerate)
+    F = be.stepper.fourier
+    err = np.abs(be.phi_hat - F.fwd(be.phi)).max() / np.abs(be.phi_hat).max()
+    print(f"invisible part of phi_hat after 300 steps: {err:.2e}")
+    assert err < 1e-12

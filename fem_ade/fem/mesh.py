@@ -14,6 +14,8 @@ mesh (``MeshHex1DG`` / ``MeshQuad1DG`` through ``MeshDG.periodic``), which is wh
 
 from __future__ import annotations
 
+import contextlib
+import io
 import logging
 import math
 from contextlib import contextmanager
@@ -206,10 +208,13 @@ def from_file(path: str | Path, dim: int = 3, L: float | None = None) -> Periodi
     path = Path(path)
     if not path.is_file():
         raise ModelError(f"mesh file not found: {path}")
-    try:
-        mio = meshio.read(path)
-    except (Exception, SystemExit) as err:  # meshio raises many kinds, or exits; one line
-        raise ModelError(f"cannot read mesh file {path}: {err or type(err).__name__}") from None
+    said = io.StringIO()
+    try:  # meshio prints its own complaints and may exit: keep them, report one line
+        with contextlib.redirect_stderr(said), contextlib.redirect_stdout(said):
+            mio = meshio.read(path)
+    except (Exception, SystemExit) as err:  # meshio raises many kinds
+        why = " ".join(said.getvalue().split()) or str(err) or type(err).__name__
+        raise ModelError(f"cannot read mesh file {path}: {why}") from None
     want = "hexahedron" if dim == 3 else "quad"
     kinds = {c.type for c in mio.cells}
     if kinds != {want}:

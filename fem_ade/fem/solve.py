@@ -207,6 +207,21 @@ class FourierGrid:
     def fwd(self, u):
         return self.fft.rfftn(np.reshape(u, self.shape), axes=self.axes, workers=self.workers)
 
+    def hermitian(self, uh):
+        """Remove (in place) the part of a half-spectrum that ``irfftn`` cannot see: in the
+        planes k_last = 0 and n/2 a real field has û(−k) = conj(û(k)). Round-off breaks this,
+        and a step whose operator grows some modes (the paper's scheme where
+        κ(εk⁴ − (2/ε)k²) < 0, momentum) grows the broken part unseen until it reaches the field
+        (measured: the discocyte diverged at step 9681 without this). As the spectral
+        reference does (``SpectralBackend._hermitian``)."""
+        axes = tuple(range(len(self.shape) - 1))
+        n = self.shape[-1]
+        for iz in (0, n // 2) if n % 2 == 0 else (0,):
+            plane = uh[..., iz]
+            mirror = np.conj(np.roll(np.flip(plane, axis=axes), 1, axis=axes))
+            uh[..., iz] = 0.5 * (plane + mirror)
+        return uh
+
     def inv(self, uh):
         return self.fft.irfftn(uh, s=self.shape, axes=self.axes, workers=self.workers).ravel()
 
