@@ -17,7 +17,7 @@ import pytest
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 SCRIPTS = sorted(STUDIES.glob("*.py"))
 #: studies whose quick mode is too long for the default suite (they run with -m slow)
-SLOW = {"convergence_fem"}
+SLOW: set[str] = set()
 
 
 def _load(path):
@@ -39,15 +39,52 @@ def check_hard_cases(rows, out):
             assert r["detail"], r
 
 
-def check_cost_accuracy(results, out):
-    """The FEM errors against the reference fall with n (the quick mode's n = 16–32 are
-    pre-asymptotic for the spectral method: its error is not monotone there)."""
-    for label in ("FEM Q1", "FEM Q2"):
-        rows = results["rows"][label]
-        errs = [r["err_E"] for r in rows]
-        print(label, [(r["n"], f"{r['err_E']:.2e}", f"{r['wall_s']:.2f}s") for r in rows])
-        assert all(math.isfinite(e) and e >= 0 for e in errs), label
-        assert errs[-1] < errs[0], f"{label}: error did not fall with n: {errs}"
+def check_cost(result, out):
+    """Every point is finite; the Pareto front is cheaper-and-worse to dearer-and-better; the
+    time to an accuracy agrees with the points; Q2 and spectral reach 1 %, Q1 at these n does
+    not (2D ellipse, errors from the quick convergence levels)."""
+    cost = _load(STUDIES / "cost.py")
+    assert cost.time_to([(1.0, 1e-1), (10.0, 1e-3)], 1e-2) == pytest.approx(10**0.5)
+    assert cost.time_to([(1.0, 1e-1), (10.0, 1e-3)], 1e-4) is None
+    assert cost.time_to([(2.0, 1e-1), (1.0, 1e-3)], 1e-2) == 1.0
+    s = result["scenes"]["ellipse-2d"]
+    assert all(math.isfinite(p["err_E"]) and p["cpu_s"] > 0 for p in s["points"])
+    curves = {p["curve"] for p in s["points"]}
+    assert {"spectral", "Q1", "Q2", "Q1 amg"} <= curves and any("stabilized" in c for c in curves)
+    front = s["pareto"]
+    assert front and all(a["cpu_s"] <= b["cpu_s"] and a["err_E"] > b["err_E"]
+                         for a, b in zip(front, front[1:], strict=False))
+    assert min(p["err_E"] for p in s["points"]) == front[-1]["err_E"]
+    tt = s["time_to"]
+    assert tt["spectral"]["0.01"] is not None and tt["Q2"]["0.01"] is not None
+    assert tt["Q1"]["0.0001"] is None
+    assert (out / "cost_quick.md").is_file() and (out / "cost-ellipse-2d_quick.png").is_file()
+
+
+def check_convergence(results, out):
+    """2D ellipse: Q1 rates ≈ 2 and Q2 ≥ 3 in E, V, A; the spectral error is tiny; every
+    steady run is steady and its error falls with n; the paper's scheme is first order in
+    Δt; the stabilized scheme advances physical time more slowly (more so at larger Δt)."""
+    rates = results["spatial"]["ellipse-2d"]["rates"]
+    print({k: {q: round(v, 2) for q, v in r.items() if v is not None} for k, r in rates.items()})
+    for q in ("E", "V", "A", "phi_L2"):
+        assert 1.7 < rates["Q1"][q] < 2.5, (q, rates["Q1"])
+        assert 1.7 < rates["Q1 graded"][q] < 2.5, (q, rates["Q1 graded"])
+        assert rates["Q2"][q] > 3.0, (q, rates["Q2"])
+    rows = results["spatial"]["ellipse-2d"]["rows"]
+    assert max(r["errors"]["E"] for r in rows if r["label"] == "spectral") < 1e-4
+    for label in ("Q2", "Q2 quadrature", "Q2 consistent"):
+        errs = [r["errors"]["E"] for r in results["q2"]["rows"] if r["label"] == label]
+        assert errs[-1] < errs[0] / 3, (label, errs)
+    st = results["steady"]
+    assert all(r["status"] == "steady" for r in st["rows"]), st["rows"]
+    q1 = [r["errors"]["E"] for r in st["rows"] if r["label"] == "Q1"]
+    assert q1 == sorted(q1, reverse=True), q1
+    tm = results["temporal"]
+    assert 0.8 < tm["orders"]["paper"] < 1.4, tm["orders"]
+    slow = [s["slowdown"] for s in tm["slowdown"]]
+    assert all(s is not None and s >= 1 for s in slow) and slow[-1] > slow[0], slow
+    assert (out / "convergence_quick.md").is_file() and (out / "convergence_quick.png").is_file()
 
 
 def check_constraints_study(cases, out):
@@ -98,11 +135,6 @@ def check_gallery(result, out):
     text = (out / "gallery.md").read_text()
     assert "| discocyte (Fig. 1) | discocyte |" in text
     assert (out / "montage-spectral.png").is_file()
-
-
-def check_convergence_fem(rates, out):
-    assert min(rates["ellipse-2d"]["Q1"][q] for q in ("E", "V", "A")) > 1.7
-    assert min(rates["ellipse-2d"]["Q2"][q] for q in ("E", "V", "A")) > 3.0
 
 
 ARGS = {"readme_figure": ["--steps", "2", "--n", "26"]}
