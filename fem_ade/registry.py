@@ -33,6 +33,21 @@ VOLUMES = {
                  "s'(+-1) = 0, so the bulk carries none of it",
 }
 
+#: recipes: what a run is for; each sets defaults that explicit options override
+RECIPES = {
+    "paper": "the paper's recipe: its scheme, penalties and dt, for --steps steps (default: "
+             "the scene's)",
+    "steady": "to a steady state: the stabilized scheme at 100x the paper's dt, exact "
+              "constraints, momentum (--accelerate), until E_M changes by < 1e-9 per step "
+              "(at most 20000 steps)",
+}
+#: the settings of each recipe (dt_factor multiplies the scene's dt)
+RECIPE_SETTINGS = {
+    "paper": {},
+    "steady": {"scheme": "stabilized", "dt_factor": 100.0, "constraints": "exact",
+               "accelerate": True, "until_steady": 1e-9, "max_steps": 20000},
+}
+
 #: preconditioners of the FEM step solve (fem_ade.fem.solve)
 FEM_SOLVERS = ("amg", "chebyshev", "jacobi", "fft", "auto")
 
@@ -71,10 +86,12 @@ BACKENDS = {
             Option("mesh", str, None, None,
                    "a periodic hexahedral mesh file (read with meshio), or graded[:g] for a "
                    "graded tensor mesh (default: uniform, n cells per direction)"),
-            Option("solver", str, "amg", FEM_SOLVERS,
-                   "preconditioner of the PCG step solve: amg (default; flat iteration counts "
-                   "in h and dt), chebyshev or jacobi (cheap smoothers for the mass-dominated "
-                   "paper dt), fft (uniform Q1 only: exact), auto"),
+            Option("solver", str, "auto", FEM_SOLVERS,
+                   "how the step's system is solved: auto (default: fft on uniform Q1 meshes, "
+                   "else chebyshev where the system is mass-dominated on a uniform mesh, else "
+                   "amg); fft (uniform Q1 only: the same FEM system solved exactly in Fourier "
+                   "space); PCG preconditioned by amg (flat iteration counts in h and dt), "
+                   "chebyshev or jacobi"),
         ),
     ),
     "spectral": BackendSpec(

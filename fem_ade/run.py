@@ -17,7 +17,7 @@ import signal
 import sys
 from pathlib import Path
 
-from .registry import BACKENDS, CONSTRAINTS, IC_VARIANTS, SCHEMES, VOLUMES
+from .registry import BACKENDS, CONSTRAINTS, IC_VARIANTS, RECIPES, SCHEMES, VOLUMES
 
 EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
 #: the options --resume takes; every other one is stored in the run folder
@@ -42,6 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--backend", choices=tuple(BACKENDS), default="fem",
                    help="; ".join(f"{b.name}: {b.description}" for b in BACKENDS.values())
                    + " (default fem)")
+    p.add_argument("--recipe", choices=tuple(RECIPES), default="paper",
+                   help="what the run is for; sets defaults that the options below override: "
+                   + "; ".join(f"{k}: {v}" for k, v in RECIPES.items()))
     p.add_argument("--n", type=int, help="cells (grid points) per direction (default: the scene's)")
     p.add_argument("--dt", type=float, help="time step (default: the paper's, per scene)")
     stop = p.add_mutually_exclusive_group()
@@ -169,14 +172,21 @@ def _main(argv) -> int:
         from .scenes import SCENES
 
         return _error(f"give a scene ({', '.join(SCENES)}) or a .toml file")
-    if args.max_steps is not None and args.until_steady is None:
-        return _error("--max-steps caps --until-steady; with --steps it would be ignored")
     if args.out == "":
         return _error("--out needs a folder name")
     try:
+        from .runs import recipe
         from .scenes import resolve_scene
 
         scene = resolve_scene(args.scene)
+        for key, value in recipe(args.recipe, scene).items():
+            if key in ("until_steady", "max_steps") and "steps" in given:
+                continue  # --steps N: N steps (with the recipe's numerics)
+            if key not in given:
+                setattr(args, key, value)
+        if args.max_steps is not None and args.until_steady is None:
+            raise ModelError("--max-steps caps --until-steady; with --steps it would be "
+                             "ignored")
         if args.volume is not None:
             scene = scene.with_(volume_functional=args.volume)
         options = backend_options(args)

@@ -61,6 +61,19 @@ def verdict(scene: Scene, shape: dict | None) -> dict | None:
     return {"paper": scene.shape, "run": shape["label"], "same": same, "line": line}
 
 
+def recipe(name: str, scene: Scene) -> dict:
+    """The :func:`simulate` keyword arguments of a recipe (:data:`fem_ade.registry.RECIPES`)
+    for ``scene``: ``simulate(scene, **{**recipe("steady", scene), **yours})``."""
+    from .registry import RECIPE_SETTINGS
+
+    if name not in RECIPE_SETTINGS:
+        raise ModelError(f"unknown recipe {name!r}; choose from {', '.join(RECIPE_SETTINGS)}")
+    kw = dict(RECIPE_SETTINGS[name])
+    if "dt_factor" in kw:
+        kw["dt"] = kw.pop("dt_factor") * scene.dt
+    return kw
+
+
 def simulate(
     scene: Scene,
     *,
@@ -157,7 +170,9 @@ def simulate(
         info = be.info()
         return (f"{scene.name} with the {backend} backend ({info.get('element', '')} "
                 f"n = {n}, {scheme} scheme, {constraints} constraints, dt = {dt:g}, "
-                f"{steps if steps is not None else f'until steady {until_steady:g}'} steps)"
+                + (f"{steps} steps" if steps is not None else
+                   f"until steady (tol {until_steady:g}, at most {max_steps} steps)")
+                + (", momentum" if accelerate else "") + ")"
                 + (f" into {out}" if out is not None else ""))
     if out is not None:
         prepare_out_dir(out, force=force, fresh=fresh)

@@ -38,6 +38,19 @@ def test_cli_list(cli):
     assert "Fig. 9" in r.stdout
 
 
+@pytest.mark.parametrize("extra, expect", [
+    ([], "stabilized scheme, exact constraints, dt = 2e-05, until steady (tol 1e-09, at most "
+         "20000 steps), momentum"),
+    (["--steps", "7"], "stabilized scheme, exact constraints, dt = 2e-05, 7 steps, momentum"),
+    (["--scheme", "paper", "--dt", "1e-7", "--until-steady", "1e-6"],
+     "paper scheme, exact constraints, dt = 1e-07, until steady (tol 1e-06, at most 20000"),
+])
+def test_recipe_sets_defaults_that_options_override(cli, extra, expect):
+    r = cli(["torus", "--recipe", "steady", "--n", "36", "--dry-run", *extra])
+    assert r.returncode == 0, r.stderr
+    assert expect in r.stdout, r.stdout
+
+
 def test_until_steady_stops(cli, tmp_path):
     out = tmp_path / "S"
     r = cli(["sphere", "--n", "32", "--until-steady", "1e-4", "--every", "5", "--out", out,

@@ -15,7 +15,7 @@ from fem_ade.scenes import get_scene, sphere_values
 
 @pytest.fixture(scope="module")
 def disc16():
-    return FEMBackend(get_scene("discocyte"), n=16, dt=5e-7)
+    return FEMBackend(get_scene("discocyte"), n=16, dt=5e-7, solver="amg")
 
 
 def test_protocol_and_info(disc16):
@@ -25,6 +25,11 @@ def test_protocol_and_info(disc16):
     info = json.loads(json.dumps(b.info()))
     assert info["order"] == 1 and info["n_dofs"] == 16**3 and info["solver"] == "amg"
     assert info["mesh"]["kind"] == "uniform" and info["setup_s"] > 0
+    # the default solver takes the exact Fourier path on a uniform Q1 mesh, AMG elsewhere
+    default = FEMBackend(get_scene("discocyte"), n=12, dt=5e-7)
+    assert default.info()["solver"] == "fft (direct)"
+    graded = FEMBackend(get_scene("discocyte"), n=12, dt=5e-7, mesh="graded")
+    assert graded.info()["solver"] == "amg"
     f = b.fields()
     assert f["phi"].shape == (16**3,) and f["points"].shape == (3, 16**3)
     assert set(b.diagnostics()) >= {"E", "W", "G", "V", "A", "dA"}

@@ -31,7 +31,8 @@ class FEMBackend(BackendBase):
     - ``mesh``: None/"uniform" (n cells per side), "graded[:g]" (smooth periodic grading,
       largest/smallest cell (1 + g)/(1 − g), g = 0.3), a mesh file path (meshio; opposite
       faces must carry matching nodes) or a :class:`fem_ade.fem.mesh.PeriodicMesh`;
-    - ``solver``: "amg" | "chebyshev" | "jacobi" | "fft" | "auto" (:mod:`fem_ade.fem.solve`);
+    - ``solver``: "auto" (default) | "amg" | "chebyshev" | "jacobi" | "fft"
+      (:mod:`fem_ade.fem.solve`);
     - ``rtol``: PCG tolerance relative to ‖b − Sφⁿ‖ (default 1e-6);
     - ``products``: "nodal" (default) or "quadrature" (scikit-fem LinearForms);
     - ``mass``: "lumped" (default) or "consistent" mass in the time derivative and products;
@@ -46,7 +47,7 @@ class FEMBackend(BackendBase):
     def __init__(self, scene: Scene, *, n: int, dt: float | None = None,
                  ic: str = "consistent", perturb: float = 0.0, seed: int = 0,
                  scheme: str = "paper", constraints: str = "penalty", order: int = 1,
-                 mesh=None, solver: str = "amg", rtol: float | None = None,
+                 mesh=None, solver: str = "auto", rtol: float | None = None,
                  products: str = "nodal", mass: str = "lumped", assembly: str = "auto",
                  start_state: dict | None = None):
         t0 = time.perf_counter()
