@@ -50,6 +50,8 @@ RECIPE_SETTINGS = {
 
 #: preconditioners of the FEM step solve (fem_ade.fem.solve)
 FEM_SOLVERS = ("amg", "chebyshev", "jacobi", "fft", "auto")
+#: the FEM's linear algebra: one process (NumPy, SciPy, pyamg) or PETSc over MPI ranks
+LINALGS = ("numpy", "petsc")
 
 
 @dataclass(frozen=True)
@@ -92,6 +94,11 @@ BACKENDS = {
                    "amg); fft (uniform Q1 only: the same FEM system solved exactly in Fourier "
                    "space); PCG preconditioned by amg (flat iteration counts in h and dt), "
                    "chebyshev or jacobi"),
+            Option("rtol", float, None, None,
+                   "PCG tolerance relative to the step's initial residual (default 1e-6)"),
+            Option("linalg", str, "numpy", LINALGS,
+                   "numpy (default: one process) or petsc (PETSc KSP + hypre/GAMG, the mesh "
+                   "distributed over the ranks of mpirun; README 'Running on a cluster')"),
         ),
     ),
     "spectral": BackendSpec(

@@ -13,6 +13,7 @@ that an interrupt during start-up is one line too.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 from pathlib import Path
@@ -121,18 +122,63 @@ def list_scenes() -> str:
     return "\n".join(lines)
 
 
+def world() -> tuple[int, int]:
+    """(rank, size) of the MPI job this process is part of, from the launcher's environment
+    (without initialising MPI): (0, 1) when not started by mpirun/mpiexec."""
+    for rank, size in (("OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_SIZE"),
+                       ("PMI_RANK", "PMI_SIZE"), ("PMIX_RANK", "PMI_SIZE")):
+        if rank in os.environ and size in os.environ:
+            return int(os.environ[rank]), int(os.environ[size])
+    return 0, 1
+
+
+RANK, SIZE = world()
+
+
 def _error(message: str) -> int:
-    print(f"fem_ade.run: error: {message}", file=sys.stderr)
+    if RANK == 0:  # under mpirun every rank checks the same input: rank 0 says it once
+        print(f"fem_ade.run: error: {message}", file=sys.stderr)
     return EXIT_BAD_INPUT
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command line; under ``mpirun -n P`` (``--linalg petsc``) every rank runs it,
+    rank 0 writes the run folder and prints, the others work in a private temporary folder
+    (removed at the end), and a failure on any rank ends all of them (MPI_Abort) with its
+    exit code."""
     signal.signal(signal.SIGTERM, _interrupt)
+    if SIZE == 1:
+        try:
+            return _main(argv)
+        except KeyboardInterrupt:
+            print("fem_ade.run: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+    import shutil
+    import tempfile
+
+    scratch = tempfile.mkdtemp(prefix=f"fem_ade-rank{RANK}-")
+    stdout = sys.stdout
     try:
-        return _main(argv)
+        if RANK > 0:
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (closed below)
+        code = _main(argv, scratch=scratch if RANK > 0 else None)
     except KeyboardInterrupt:
-        print("fem_ade.run: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        if RANK == 0:
+            print("fem_ade.run: interrupted", file=sys.stderr)
+        code = EXIT_INTERRUPTED
+    finally:
+        if sys.stdout is not stdout:
+            sys.stdout.close()
+            sys.stdout = stdout
+        shutil.rmtree(scratch, ignore_errors=True)
+    if code not in (0,) and "mpi4py" in sys.modules:
+        from mpi4py import MPI
+
+        if MPI.Is_initialized() and not MPI.Is_finalized():
+            sys.stdout.flush()
+            sys.stderr.flush()
+            MPI.COMM_WORLD.Abort(code)
+    return code
 
 
 def given_options(argv, parser) -> set[str]:
@@ -145,7 +191,9 @@ def given_options(argv, parser) -> set[str]:
     return given
 
 
-def _main(argv) -> int:
+def _main(argv, scratch: str | None = None) -> int:
+    """The command line; ``scratch``: this rank's private folder (MPI ranks > 0), where it
+    writes what rank 0 writes into the run folder."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.list:
@@ -162,8 +210,15 @@ def _main(argv) -> int:
         if extra:
             return _error(f"--resume continues with the run's own options; it takes only "
                           f"--steps and --quiet, not --{', --'.join(extra).replace('_', '-')}")
+        folder = args.resume
+        if scratch is not None and Path(folder).is_dir():  # read the run, write the copy
+            import shutil
+
+            shutil.copytree(folder, scratch, dirs_exist_ok=True)
+            folder = scratch
         try:
-            result, scene, config = resume(args.resume, steps=args.steps, quiet=args.quiet,
+            result, scene, config = resume(folder, steps=args.steps,
+                                           quiet=args.quiet or scratch is not None,
                                            with_config=True)
         except ModelError as err:
             return _error(str(err))
@@ -192,7 +247,13 @@ def _main(argv) -> int:
         options = backend_options(args)
         if args.n is not None and options.get("mesh") and "." in Path(options["mesh"]).name:
             raise ModelError("--n does not apply to --mesh FILE: the file sets the resolution")
+        if SIZE > 1 and options.get("linalg") != "petsc":
+            raise ModelError(f"{SIZE} MPI ranks would each run the whole job: under mpirun "
+                             "use --backend fem --linalg petsc")
         out = args.out or default_out(scene.name, args.backend)
+        if scratch is not None:  # an MPI rank > 0: the same run, written to its own folder
+            out, args.out, args.force, args.quiet, args.no_render = scratch, scratch, True, \
+                True, True
         result = simulate(
             scene, backend=args.backend, n=args.n, dt=args.dt, steps=args.steps,
             until_steady=args.until_steady,

@@ -128,7 +128,12 @@ def _run(scene, folder: Path, kwargs: dict, quiet: bool):
     if _finished(folder):
         return None
     if (folder / "checkpoint.npz").is_file() and (folder / "run.json").is_file():
-        return resume(folder, quiet=quiet)
+        from fem_ade.model import ModelError
+
+        try:
+            return resume(folder, quiet=quiet)
+        except ModelError as err:  # e.g. a checkpoint of an older version: start again
+            print(f"  {folder}: not resumable ({err}); starting again", flush=True)
     return simulate(scene, out=folder, force=True, quiet=quiet, render=True, **kwargs)
 
 

@@ -14,11 +14,12 @@ import numpy as np
 
 from ..backend import BackendBase, check_choice
 from ..model import ModelError
-from ..registry import FEM_SOLVERS
+from ..registry import FEM_SOLVERS, LINALGS
 from ..scenes import Scene
 from . import mesh as fmesh
 from . import output
 from .assemble import operators
+from .solve import StepSolver
 from .step import MixedStep
 
 
@@ -43,13 +44,24 @@ class FEMBackend(BackendBase):
 
     name = "fem"
     extra_columns = ("krylov_its", "solve_s")
+    #: the linear algebra: NumPy/SciPy/pyamg in one process (``--linalg petsc``:
+    #: :class:`fem_ade.fem.petsc.PETScFEMBackend`, distributed over MPI ranks)
+    linalg = "numpy"
+    solver_class = StepSolver
+
+    def __new__(cls, *args, linalg: str = "numpy", **kwargs):
+        if linalg == "petsc" and cls is FEMBackend:
+            from .petsc import PETScFEMBackend
+
+            return super().__new__(PETScFEMBackend)
+        return super().__new__(cls)
 
     def __init__(self, scene: Scene, *, n: int, dt: float | None = None,
                  ic: str = "consistent", perturb: float = 0.0, seed: int = 0,
                  scheme: str = "paper", constraints: str = "penalty", order: int = 1,
                  mesh=None, solver: str = "auto", rtol: float | None = None,
                  products: str = "nodal", mass: str = "lumped", assembly: str = "auto",
-                 start_state: dict | None = None):
+                 linalg: str = "numpy", start_state: dict | None = None):
         t0 = time.perf_counter()
         super().__init__(scene, n=n, scheme=scheme, constraints=constraints)
         check_choice("FEM order", order, (1, 2))
@@ -57,11 +69,11 @@ class FEMBackend(BackendBase):
         self.order = order
         p = self.params
         self.mesh = fmesh.make(self.scene.dim, n, p.L, mesh)
-        self.ops = operators(self.mesh, order, "skfem" if products == "quadrature" else assembly)
+        self.ops = self._operators("skfem" if products == "quadrature" else assembly)
         self.K, self.w = self.ops.K, self.ops.weights
         self.stepper = MixedStep(self.ops, p, scheme=scheme, exact=self.exact, mass=mass,
                                  products=products, solver=solver, rtol=rtol,
-                                 fft_grid=self._fft_grid())
+                                 fft_grid=self._fft_grid(), solver_class=self.solver_class)
         t1 = time.perf_counter()
         if start_state is not None:
             self.set_state(start_state)
@@ -84,16 +96,23 @@ class FEMBackend(BackendBase):
 
     @classmethod
     def memory_bytes(cls, scene: Scene, n: int, *, order: int = 1, mesh=None,
-                     solver: str = "amg") -> float:
+                     solver: str = "auto", linalg: str = "numpy", rtol=None) -> float:
         return cls.bytes_per_dof * (4.6 if order == 2 else 1.0) * float(order * n) ** scene.dim
 
     @classmethod
     def check_options(cls, scene: Scene, n: int, *, order: int = 1, mesh=None,
-                      solver: str = "amg") -> float:
-        """Order, solver and mesh option; the largest node spacing (of a graded mesh or a
-        mesh file too, which is read here: its own spacing, not n's, is checked)."""
+                      solver: str = "auto", linalg: str = "numpy", rtol=None) -> float:
+        """Order, solver, mesh, linear algebra and tolerance; the largest node spacing (of a
+        graded mesh or a mesh file too, which is read here: its own spacing, not n's)."""
         check_choice("FEM order", order, (1, 2))
         check_choice("FEM solver", solver, FEM_SOLVERS)
+        check_choice("linear algebra (--linalg)", linalg, LINALGS)
+        if rtol is not None and not (isinstance(rtol, float | int) and 0 < rtol < 1):
+            raise ModelError(f"--rtol must be a number in (0, 1), got {rtol}")
+        if linalg == "petsc":
+            from .petsc import check_options as check_petsc
+
+            check_petsc(scene, n, order=order, mesh=mesh, solver=solver)
         kind, _ = fmesh.parse_option(mesh)
         if solver == "fft" and (order != 1 or kind != "uniform"):
             raise ModelError("solver 'fft' needs a uniform tensor mesh with Q1 elements")
@@ -110,6 +129,10 @@ class FEMBackend(BackendBase):
         self.dt = float(dt)
         self.stepper.set_dt(self.dt, self.phi, self.mu, self.Kphi)
         self._setup.setdefault("solver_setup_s", time.perf_counter() - t0)
+
+    def _operators(self, assembly: str):
+        """M, K, weights, DOF coordinates (:func:`fem_ade.fem.assemble.operators`)."""
+        return operators(self.mesh, self.order, assembly)
 
     def _fft_grid(self):
         """(cells, spacing) when the DOFs form a uniform Q1 grid (the ``fft`` solver), else None."""

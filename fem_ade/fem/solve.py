@@ -73,11 +73,19 @@ AMG_OPTIONS: dict = {}
 SHIFT_GRID = 1.05
 
 
+#: the sum of a partial sum over the MPI ranks (None: one process); set by
+#: :mod:`fem_ade.fem.petsc` when the DOFs are distributed, so that every functional and
+#: every dot product of the step is global
+_ALLREDUCE = None
+
+
 def _dot(a, b) -> float:
     """a·b without BLAS: ``np.dot`` of long vectors goes to a threaded BLAS, whose threads
     wait for a time slice on a loaded machine (measured on 2 busy cores: 7 ms per dot of 32³
-    values, ten times the step's cost); einsum's own loop takes 20 µs, always."""
-    return float(np.einsum("i,i->", a, b))
+    values, ten times the step's cost); einsum's own loop takes 20 µs, always. Distributed
+    DOFs: this rank's part, summed over the ranks."""
+    value = float(np.einsum("i,i->", a, b))
+    return value if _ALLREDUCE is None else _ALLREDUCE(value)
 
 
 def pcg(A, b, x0, M, atol, maxiter=500):

@@ -73,7 +73,7 @@ class MixedStep:
 
     def __init__(self, ops, params: Params, *, scheme: str, exact: bool, mass: str = "lumped",
                  products: str = "nodal", solver: str = "amg", rtol: float | None = None,
-                 fft_grid=None):
+                 fft_grid=None, solver_class=StepSolver):
         if mass not in ("lumped", "consistent"):
             raise ModelError(f"mass must be 'lumped' or 'consistent', got {mass!r}")
         if products not in ("nodal", "quadrature"):
@@ -93,6 +93,7 @@ class MixedStep:
             raise ModelError("solver 'fft' needs a uniform tensor mesh with Q1 elements")
         self.fourier = FourierGrid(*fft_grid) if solver == "fft" else None
         self.solver_opts = {"kind": solver, "rtol": rtol}
+        self.solver_class = solver_class  # StepSolver, or fem_ade.fem.petsc.PetscStepSolver
         self.stab: tuple[float, float] | None = None
         self.z: tuple[np.ndarray, np.ndarray] | None = None
         self._solvers: dict[tuple, StepSolver] = {}
@@ -114,7 +115,7 @@ class MixedStep:
             if len(self._solvers) >= 4:  # adaptive Δt, ratchet: keep the few most recent
                 self._solvers.pop(next(iter(self._solvers)))
             s0, s2 = (0.0, 0.0) if stab is None else stab
-            self._solvers[key] = StepSolver(
+            self._solvers[key] = self.solver_class(
                 self.Mt, self.K, self.w, dt=dt, kappa=p.kappa, eps=p.eps, grid=self.fft_grid,
                 s0=s0, s2=s2, cache=None if stab is None else self._preconditioners,
                 lumped=self.mass == "lumped", **self.solver_opts)
