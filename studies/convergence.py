@@ -310,9 +310,18 @@ def main(argv=None) -> dict:
     ap.add_argument("--quick", action="store_true", help="seconds (the test suite)")
     ap.add_argument("--parts", nargs="*", default=["spatial", "q2", "steady", "temporal"])
     ap.add_argument("--out", default=str(OUT))
+    ap.add_argument("--scenes", nargs="*", default=None,
+                    help="the spatial part for these scenes only (the others' results kept)")
     args = ap.parse_args(argv)
     quick = args.quick or bool(os.environ.get("CI"))
     plan = QUICK if quick else FULL
+    if args.scenes:
+        unknown = set(args.scenes) - set(plan["scenes"])
+        if unknown:
+            ap.error(f"no spatial study of {', '.join(sorted(unknown))}; "
+                     f"choose from {', '.join(plan['scenes'])}")
+        plan = {**plan, "scenes": {k: v for k, v in plan["scenes"].items()
+                                   if k in args.scenes}}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     name = "convergence_quick.json" if quick else "convergence.json"
@@ -324,7 +333,8 @@ def main(argv=None) -> dict:
         if part in args.parts:
             print(f"{part}:", flush=True)
             t1 = time.perf_counter()
-            results[part] = _strip(fn())
+            new = _strip(fn())
+            results[part] = ({**results.get(part, {}), **new} if part == "spatial" else new)
             results.setdefault("part_s", {})[part] = time.perf_counter() - t1
             path.write_text(json.dumps(results, indent=1))  # resumable by part
     results["run_s"] = sum(results.get("part_s", {}).values()) or time.perf_counter() - t0

@@ -12,13 +12,14 @@ same uniform mesh with the ``fft`` solver, which solves the same FEM system exac
              with momentum (``accelerate``) to a steady state, with the paper's volume
              functional; ``b-loc`` the same with the localized one (``--volume localized``);
 * ``c``      the same numerics from the paper's own shape (``--ic seeded``), perturbed the
-             same way: does it stay? Its energy beside ``b``'s end;
+             same way: does it stay? Its energy beside ``b``'s end; ``c-loc`` the same
+             with the localized volume functional;
 * ``d``      (``discocyte``, ``torus``; spectral) ``b`` with ε halved (ΔA₀ halved with D, so
              that the reduced targets stay) and n doubled: the sharp-interface check.
 
 Steady means: the relative change of E_M per step over a record interval below ``TOL``
 and the same shape label over the last records. A steady state can be a saddle (the energy
-rate cannot tell): every steady end of ``b``, ``b-loc``, ``c``, ``d`` is kicked with another
+rate cannot tell): every steady end of ``b``, ``b-loc``, ``c``, ``c-loc``, ``d`` is kicked with another
 smooth perturbation (0.05, seed 2) and run to a steady state again (``kick``); it is stable
 if the kick returns to the same label and E (to 1e-4), else the kick's end is reported too.
 
@@ -47,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 OUT = Path(__file__).resolve().parent / "results" / "gallery"
-VARIANTS = ("a", "b", "b-loc", "c", "d")
+VARIANTS = ("a", "b", "b-loc", "c", "c-loc", "d")
 BACKENDS = ("spectral", "fem")
 TOL = 1e-9
 #: steps of the paper's recipe (variant a) per backend, and the cap of the steady-state runs
@@ -57,7 +58,8 @@ PERTURB, KICK = (0.05, 1), (0.05, 2)
 SCENES_D = ("discocyte", "torus")
 
 
-def plan(scene_names, backends, variants, quick: bool) -> list[dict]:
+def plan(scene_names, backends, variants, quick: bool,
+         max_steps: int = MAX_STEPS) -> list[dict]:
     """The runs: one dict of simulate() keyword arguments (and bookkeeping) per case."""
     from fem_ade.scenes import PAPER_SCENES
     from fem_ade.seeds import SIZES
@@ -69,7 +71,7 @@ def plan(scene_names, backends, variants, quick: bool) -> list[dict]:
             for backend in backends:
                 if variant == "d" and (backend != "spectral" or name not in SCENES_D):
                     continue
-                if variant == "c" and name not in SIZES:
+                if variant in ("c", "c-loc") and name not in SIZES:
                     continue
                 n = scene.n * (2 if variant == "d" else 1)
                 if quick:
@@ -84,11 +86,11 @@ def plan(scene_names, backends, variants, quick: bool) -> list[dict]:
                 else:
                     kw.update(scheme="stabilized", constraints="exact", accelerate=True,
                               until_steady=3e-3 if quick else TOL,
-                              max_steps=60 if quick else MAX_STEPS, shape_every=10 if quick
+                              max_steps=60 if quick else max_steps, shape_every=10 if quick
                               else 250, perturb=PERTURB[0], seed=PERTURB[1])
                     kw["every"] = 10 if quick else 50
                     kw["dt"] = 100 * scene.dt / (8 if variant == "d" else 1)
-                    if variant == "c":
+                    if variant in ("c", "c-loc"):
                         kw["ic"] = "seeded"
                 cases.append({"variant": variant, "backend": backend, "scene": name,
                               "kwargs": kw})
@@ -99,7 +101,7 @@ def scene_for(case: dict):
     from fem_ade.scenes import PAPER_SCENES
 
     scene = PAPER_SCENES[case["scene"]]
-    if case["variant"] == "b-loc":
+    if case["variant"] in ("b-loc", "c-loc"):
         scene = scene.with_(volume_functional="localized")
     if case["variant"] == "d":  # ε halved; D = 2ε/3 follows, ΔA₀ with it (same Δa₀)
         p = scene.params
@@ -236,6 +238,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--report-only", action="store_true")
     ap.add_argument("--keep", action="store_true", help="keep fields, series and checkpoints")
     ap.add_argument("--verbose", action="store_true", help="progress bars")
+    ap.add_argument("--max-steps", type=int, default=MAX_STEPS,
+                    help="cap of the steady-state runs (default %(default)s); a run that "
+                    "reaches it is reported as not converged")
     args = ap.parse_args(argv)
     from fem_ade.scenes import PAPER_SCENES
 
@@ -243,7 +248,7 @@ def main(argv=None) -> dict:
     root = Path(args.out)
     names = args.scenes or (["discocyte"] if quick else list(PAPER_SCENES))
     backends = args.backend or (["spectral"] if quick else list(BACKENDS))
-    cases = plan(names, backends, args.variants, quick)
+    cases = plan(names, backends, args.variants, quick, args.max_steps)
     results = {}
     for case in cases:
         key = (case["variant"], case["backend"], case["scene"])
@@ -414,6 +419,8 @@ def montage(root: Path, data, names, backend, variants) -> Path | None:
     cells = {k: p for k, p in cells.items() if p.is_file()}
     if not cells:
         return None
+    names = [n for n in names if any((n, v) in cells for v in variants)]  # rows and columns
+    variants = [v for v in variants if any((n, v) in cells for n in names)]  # that were run
     fig = Figure(figsize=(3.4 * len(variants) + 1.2, 1.9 * len(names) + 0.6), dpi=100)
     grid = fig.subplots(len(names), len(variants), squeeze=False)
     for i, n in enumerate(names):
@@ -468,7 +475,7 @@ def phase_diagram(root: Path, data, names) -> Path | None:
 
     from fem_ade.scenes import PAPER_SCENES
 
-    fig = Figure(figsize=(9.5, 6.5), dpi=100)
+    fig = Figure(figsize=(11.5, 6.5), dpi=100)
     ax = fig.subplots()
     for kind, pts in spheroid_branches().items():
         ax.plot(pts[:, 0], pts[:, 1], color="0.6", lw=1.2,
@@ -476,7 +483,7 @@ def phase_diagram(root: Path, data, names) -> Path | None:
     ax.plot([1 / math.sqrt(2)], [math.sqrt(2)], "s", color="0.4", ms=7,
             label="two equal spheres (limit)")
     ax.plot([1], [1], "o", color="0.4", ms=7, label="sphere")
-    marks = {"b": "o", "b-loc": "^", "c": "D", "d": "*"}
+    marks = {"b": "o", "b-loc": "^", "c": "D", "c-loc": "s", "d": "*"}
     colours = {}
     palette = ["#c0392b", "#2980b9", "#27ae60", "#8e44ad", "#d35400", "#16a085", "#2c3e50",
                "#f39c12", "#7f8c8d", "#e84393", "#6c5ce7", "#00b894", "#b33939"]
@@ -484,26 +491,25 @@ def phase_diagram(root: Path, data, names) -> Path | None:
     for i, n in enumerate(names):
         colours[n] = palette[i % len(palette)]
         v0, m0 = PAPER_SCENES[n].params.reduced_targets()
-        ax.plot([v0], [m0], "x", color=colours[n], ms=9, mew=2)
+        ax.plot([v0], [m0], "x", color=colours[n], ms=9, mew=2, label=n)
         for v, mk in marks.items():
             a = data.get((v, "spectral", n))
             if a and a.get("shape") and a["status"] == "steady":
                 sh = a["shape"]
                 ax.plot([sh["reduced_volume"]], [sh["reduced_area_difference"]], mk,
-                        color=colours[n], ms=7, mfc="none" if v == "b-loc" else colours[n],
-                        label=f"{n}" if v == "b" else None)
+                        color=colours[n], ms=7, mfc="none" if v.endswith("-loc") else colours[n])
                 shown = True
     if not shown:
         return None
     for v, mk in marks.items():
-        ax.plot([], [], mk, color="k", mfc="none" if v == "b-loc" else "k",
+        ax.plot([], [], mk, color="k", mfc="none" if v.endswith("-loc") else "k",
                 label=f"end of variant {v} (spectral)")
     ax.plot([], [], "x", color="k", label="targets v₀, Δa₀ (diffuse α, β, ΔA₀)")
     ax.set_xlabel("reduced volume v (sharp surface)")
     ax.set_ylabel("reduced area difference Δa (sharp surface)")
     ax.set_title("steady end states on the sharp-interface phase-diagram axes")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2, loc="upper left")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     path = root / "phase-diagram.png"
     fig.savefig(path, bbox_inches="tight")
     return path
