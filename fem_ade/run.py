@@ -111,15 +111,30 @@ def build_parser() -> argparse.ArgumentParser:
 def list_scenes() -> str:
     from .scenes import PAPER_SCENES, TEACHING_SCENES
 
-    lines = ["paper scenes (SPEC §7):"]
+    verdicts = gallery_verdicts()
+    lines = ["paper scenes (SPEC §7; under each, what the gallery found: studies/gallery.py, "
+             "variants a-d in README 'The paper's gallery'):"]
     for s in PAPER_SCENES.values():
         lines.append(f"  {s.name:16s} {s.figure:9s} eps={s.params.eps:<5g} dt={s.dt:<6g} "
                      f"n={s.n:<4d} {s.description}")
+        headline = verdicts.get(s.name, {}).get("headline", "not run yet")
+        lines.append(f"  {'':16s} gallery: {headline}")
     lines.append("teaching scenes:")
     for s in TEACHING_SCENES.values():
         lines.append(f"  {s.name:16s} {s.figure:9s} eps={s.params.eps:<5g} dt={s.dt:<6g} "
                      f"n={s.n:<4d} {s.description}")
     return "\n".join(lines)
+
+
+def gallery_verdicts() -> dict:
+    """Each paper scene's verdicts from the gallery (fem_ade/verdicts.json, written by
+    studies/gallery.py); empty when the file is missing or unreadable."""
+    import json
+
+    try:
+        return json.loads((Path(__file__).with_name("verdicts.json")).read_text())
+    except (OSError, ValueError):
+        return {}
 
 
 def world() -> tuple[int, int]:

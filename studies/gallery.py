@@ -19,9 +19,10 @@ same uniform mesh with the ``fft`` solver, which solves the same FEM system exac
 
 Steady means: the relative change of E_M per step over a record interval below ``TOL``
 and the same shape label over the last records. A steady state can be a saddle (the energy
-rate cannot tell): every steady end of ``b``, ``b-loc``, ``c``, ``c-loc``, ``d`` is kicked with another
-smooth perturbation (0.05, seed 2) and run to a steady state again (``kick``); it is stable
-if the kick returns to the same label and E (to 1e-4), else the kick's end is reported too.
+rate cannot tell): every steady end of ``b``, ``b-loc``, ``c``, ``c-loc``, ``d`` is kicked
+with another smooth perturbation (0.05, seed 2) and run to a steady state again (``kick``);
+it is stable if the kick returns to the same label and E (to 1e-4), else the kick's end is
+reported too.
 
 Results in ``studies/results/gallery/``: one folder per run (``runs/VARIANT/BACKEND/SCENE``
 with summary.json, history.csv, shapes.csv, shape.png, analysis.json, and ``kick/``), the
@@ -405,8 +406,34 @@ def write_report(root: Path, names, backends, variants, quick: bool = False) -> 
     if notes.is_file():
         lines += ["", notes.read_text()]
     (root / "gallery.md").write_text("\n".join(lines) + "\n")
-    return {"verdicts": {k: verdict(a, PAPER_SCENES[k[2]].shape, k[0]) for k, a in data.items()
-                         if a is not None}}
+    verdicts = {k: verdict(a, PAPER_SCENES[k[2]].shape, k[0]) for k, a in data.items()
+                if a is not None}
+    if root.resolve() == OUT.resolve() and not quick:
+        write_verdicts(verdicts)
+    return {"verdicts": verdicts}
+
+
+#: where ``python -m fem_ade.run --list`` reads each scene's verdict
+VERDICTS = Path(__file__).resolve().parents[1] / "fem_ade" / "verdicts.json"
+#: the run a scene's one-line verdict comes from, in order of preference
+HEADLINE = (("c", "spectral"), ("b", "spectral"), ("c", "fem"), ("b", "fem"),
+            ("a", "spectral"), ("a", "fem"))
+
+
+def write_verdicts(verdicts: dict) -> None:
+    """fem_ade/verdicts.json: per scene, its headline verdict and every run's (merged with
+    what is there, so a partial gallery run keeps the others)."""
+    old = json.loads(VERDICTS.read_text()) if VERDICTS.is_file() else {}
+    for (v, b, n), text in verdicts.items():
+        old.setdefault(n, {"runs": {}})["runs"][f"{v} ({b})"] = text
+    for entry in old.values():
+        for v, b in HEADLINE:
+            if f"{v} ({b})" in entry["runs"]:
+                entry["headline"] = f"{v} ({b}): {entry['runs'][f'{v} ({b})']}"
+                break
+        if "d (spectral)" in entry["runs"]:  # the sharp-interface check, where it ran
+            entry["headline"] += f"; with eps halved (d): {entry['runs']['d (spectral)']}"
+    VERDICTS.write_text(json.dumps(old, indent=1, sort_keys=True) + "\n")
 
 
 def montage(root: Path, data, names, backend, variants) -> Path | None:

@@ -19,6 +19,7 @@ otherwise idle machine: the 2-rank figures share the machine's two cores.
 
     python studies/scaling.py                       # 64³ and 128³, 1 and 2 ranks
     python studies/scaling.py --ns 32 --ranks 1 2   # a quick look
+    python studies/scaling.py --quick --out /tmp/s  # 16³ and 24³ (the test suite)
 """
 
 from __future__ import annotations
@@ -187,7 +188,11 @@ def main(argv=None) -> dict:
     ap.add_argument("--ranks", nargs="*", type=int, default=[1, 2])
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--redo", action="store_true", help="run finished cases again")
+    ap.add_argument("--quick", action="store_true",
+                    help="16³ and 24³ (seconds; the test suite): --ns 16 24")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.ns = [16, 24]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "scaling.json"

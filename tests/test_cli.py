@@ -36,6 +36,14 @@ def test_cli_list(cli):
     for name in ("discocyte", "torus", "nested", "six-arm", "sphere", "sphere-bending"):
         assert name in r.stdout
     assert "Fig. 9" in r.stdout
+    # every paper scene has a gallery line: a verdict from fem_ade/verdicts.json or "not run"
+    from fem_ade.run import gallery_verdicts
+    from fem_ade.scenes import PAPER_SCENES
+
+    assert r.stdout.count("gallery: ") == len(PAPER_SCENES)
+    verdicts = gallery_verdicts()
+    for name, entry in verdicts.items():
+        assert name in PAPER_SCENES and entry["headline"] in r.stdout
 
 
 @pytest.mark.parametrize("extra, expect", [

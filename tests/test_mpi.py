@@ -133,27 +133,3 @@ def test_many_ranks_without_petsc_linalg_are_refused(tmp_path):
     assert r.returncode == 2 and "--linalg petsc" in r.stderr, r.stderr
     assert not (tmp_path / "x").exists()
 
-
-@needs_mpi
-def test_scaling_study_measures_and_models(tmp_path):
-    """studies/scaling.py on tiny meshes: every case measured on every rank, the model fitted
-    from them, the iteration counts the same within one from 1 to 2 ranks."""
-    import json
-
-    r = subprocess.run([sys.executable, "studies/scaling.py", "--ns", "16", "24", "--ranks",
-                        "1", "2", "--out", str(tmp_path)], capture_output=True, text=True,
-                       env=_env(), timeout=600,
-                       cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    assert r.returncode == 0, r.stderr[-3000:]
-    data = json.loads((tmp_path / "scaling.json").read_text())
-    cases = data["cases"]
-    assert sorted(cases) == ["16-1", "16-2", "24-1", "24-2"]
-    for n in (16, 24):
-        one, two = cases[f"{n}-1"], cases[f"{n}-2"]
-        assert len(one["memory_mb"]) == 1 and len(two["memory_mb"]) == 2
-        assert abs(one["its_median"] - two["its_median"]) <= 1
-        assert two["local_dofs_rank0"] < one["dofs"]
-        assert abs(one["E"] - two["E"]) <= 1e-6 * abs(one["E"])
-    model = data["model"]
-    assert model["m1_bytes"] > 0 and model["t1_s"] > 0
-    assert "| 256³ |" in (tmp_path / "scaling.md").read_text()
