@@ -64,3 +64,18 @@ def test_params_rederive_what_they_derived():
     assert r.D == 0.01 and r.A0 == 0.7  # given, not derived: kept
     assert p.for_constraints("exact").effects == p.effects - {"volume", "area"}
     assert p.for_constraints("penalty") is p
+
+
+def test_readme_and_ci_run_the_same_tests():
+    """The README's second set-up command ends with the test command that .ci/run runs."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    readme = (root / "README.md").read_text().splitlines()
+    commands = [line.strip() for line in readme[:12] if line.startswith("    python3 -m venv")]
+    assert len(commands) == 2, commands
+    test_command = commands[1].split("&&")[-1].strip()
+    ci = [line.strip() for line in (root / ".ci" / "run").read_text().splitlines()
+          if "-m pytest" in line and not line.lstrip().startswith("#")]
+    assert ci == [test_command], (ci, test_command)
+    assert "fem_ade.run torus" in commands[0]
