@@ -279,6 +279,23 @@ def _load(root: Path, variant: str, backend: str, name: str) -> dict | None:
     return a
 
 
+def interrupted(root: Path, variant: str, backend: str, name: str) -> str | None:
+    """The verdict of a run that was stopped before it finished (no analysis.json, a
+    history): where it got to and the last shape recorded; None otherwise."""
+    folder = root / "runs" / variant / backend / name
+    if (folder / "analysis.json").is_file() or not (folder / "history.csv").is_file():
+        return None
+    from fem_ade.output import read_history
+
+    steps = int(read_history(folder / "history.csv")["step"][-1])
+    label = "-"
+    if (folder / "shapes.csv").is_file():
+        rows = (folder / "shapes.csv").read_text().strip().splitlines()
+        if len(rows) > 1:
+            label = f"{rows[-1].split(',')[2]} at step {rows[-1].split(',')[0]}"
+    return f"interrupted at step {steps} ({label}); resumable"
+
+
 def _label(a: dict | None) -> str:
     return a["shape"]["label"] if a and a.get("shape") else "-"
 
@@ -369,7 +386,8 @@ def write_report(root: Path, names, backends, variants, quick: bool = False) -> 
                                         if (v, b) != ("d", "fem"))]
     for n in names:
         scene = PAPER_SCENES[n]
-        cells = [verdict(data[(v, b, n)], scene.shape, v) if data[(v, b, n)] else "—"
+        cells = [verdict(data[(v, b, n)], scene.shape, v) if data[(v, b, n)]
+                 else interrupted(root, v, b, n) or "—"
                  for v in variants for b in backends if (v, b) != ("d", "fem")]
         lines.append(f"| {n} ({scene.figure}) | {scene.shape} | " + " | ".join(cells) + " |")
     lines += ["", "## Every run", "", HEADER, "|---" * HEADER.count("|") + "|"[:0]]
@@ -406,8 +424,9 @@ def write_report(root: Path, names, backends, variants, quick: bool = False) -> 
     if notes.is_file():
         lines += ["", notes.read_text()]
     (root / "gallery.md").write_text("\n".join(lines) + "\n")
-    verdicts = {k: verdict(a, PAPER_SCENES[k[2]].shape, k[0]) for k, a in data.items()
-                if a is not None}
+    verdicts = {k: verdict(a, PAPER_SCENES[k[2]].shape, k[0]) if a is not None
+                else interrupted(root, *k) for k, a in data.items()}
+    verdicts = {k: v for k, v in verdicts.items() if v is not None}
     if root.resolve() == OUT.resolve() and not quick:
         write_verdicts(verdicts)
     return {"verdicts": verdicts}
