@@ -254,7 +254,6 @@ class MixedStep:
     def _constrained_update(self, phi, Kphi, base, low_rank):
         """φⁿ⁺¹ = base + a z_V + b z_A with V, A at this step's targets (α, β once the ramp is
         done): (φⁿ⁺¹, λ_V, λ_A, PCG its)."""
-        p, w = self.params, self.w
         bs = [self.volume_gradient(phi), self.area_gradient(phi, Kphi)]
         zs, its = [], 0
         for i, b in enumerate(bs):
@@ -266,19 +265,25 @@ class MixedStep:
         self.z = (zs[0], zs[1])
         Kb, Kz = self.K @ base, [self.K @ z for z in zs]
         JV = [_dot(bs[0], z) for z in zs]
+        a, b = self._multipliers(base, Kb, zs, Kz, JV)
+        return base + a * zs[0] + b * zs[1], -a, -b, its
 
-        def fields(a, b):
-            return base + a * zs[0] + b * zs[1], Kb + a * Kz[0] + b * Kz[1]
+    def _multipliers(self, base, Kbase, zs, Kz, JV):
+        """(a, b) such that u = base + a z_V + b z_A has V, A at this step's targets (the
+        ramp's): Newton on the 2×2 system, whose volume row is JV = (δV/δφ)·z when V is
+        linear (the paper's functional) and is re-measured at u when it is localized."""
+        p, w = self.params, self.w
 
         def measure(a, b):
-            u, Ku = fields(a, b)
+            u = base + a * zs[0] + b * zs[1]
+            Ku = Kbase + a * Kz[0] + b * Kz[1]
             gA = self.area_gradient(u, Ku)
             gV = [_dot(self.volume_gradient(u), z) for z in zs] if p.localized_volume else JV
             J = np.array([gV, [_dot(gA, z) for z in zs]])
             return forms.volume(u, w, p.localized_volume), forms.area(u, Ku, w, p.eps), J
 
         a, b, _ = self.ramp.solve(lambda targets: solve_multipliers(measure, *targets))
-        return fields(a, b)[0], -a, -b, its
+        return a, b
 
     # -- the direct path of uniform Q1 meshes: the same steps in Fourier space -------------------
     def fourier_step(self, phi_hat, phi, mu, Kphi):
@@ -349,7 +354,7 @@ class MixedStep:
 
     def _fourier_constrained(self, phi, phi_hat, base_h, solve, low, mt):
         """:meth:`_constrained_update` in Fourier space: (φ̂ⁿ⁺¹, λ_V, λ_A)."""
-        F, p, w = self.fourier, self.params, self.w
+        F, p = self.fourier, self.params
         bV = self._volume_hat(phi, mt)
         bA = next((b for sig, b in low if sig == p.area_curvature and p.on("area")), None)
         bA = self._area_hat(phi_hat, phi, mt) if bA is None else bA
@@ -358,18 +363,7 @@ class MixedStep:
         zs = [F.inv(z) for z in zh]
         Kz = [F.inv(F.Kh * z) for z in zh]
         JV = [F.dot(bV, z) for z in zh]
-
-        def fields(a, b):
-            return base + a * zs[0] + b * zs[1], Kbase + a * Kz[0] + b * Kz[1]
-
-        def measure(a, b):
-            u, Ku = fields(a, b)
-            gA = self.area_gradient(u, Ku)
-            gV = [_dot(self.volume_gradient(u), z) for z in zs] if p.localized_volume else JV
-            J = np.array([gV, [_dot(gA, z) for z in zs]])
-            return forms.volume(u, w, p.localized_volume), forms.area(u, Ku, w, p.eps), J
-
-        a, b, _ = self.ramp.solve(lambda targets: solve_multipliers(measure, *targets))
+        a, b = self._multipliers(base, Kbase, zs, Kz, JV)
         return base_h + a * zh[0] + b * zh[1], -a, -b
 
     # -- state ------------------------------------------------------------------------------
