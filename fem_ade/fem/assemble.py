@@ -70,6 +70,13 @@ def periodic_1d(x: np.ndarray, order: int):
     return M, K, locs
 
 
+def tensor_points(locs) -> np.ndarray:
+    """(dim, N) coordinates of the tensor grid of the 1D node locations ``locs``, in C order:
+    the DOF order of the Kronecker assembly."""
+    grids = np.meshgrid(*locs, indexing="ij")
+    return np.stack([g.ravel() for g in grids])
+
+
 def kron_operators(axes, order: int) -> Operators:
     """Kronecker assembly on a tensor mesh (exact for box cells)."""
     ones = [periodic_1d(np.asarray(a, float), order) for a in axes]
@@ -87,8 +94,7 @@ def kron_operators(axes, order: int) -> Operators:
     for d in range(len(axes)):
         term = kron_all([Ks[k] if k == d else Ms[k] for k in range(len(axes))])
         K = term if K is None else K + term
-    grids = np.meshgrid(*[o[2] for o in ones], indexing="ij")
-    doflocs = np.stack([g.ravel() for g in grids])
+    doflocs = tensor_points([o[2] for o in ones])
     M = M.tocsr()
     K = K.tocsr()
     M.sort_indices()

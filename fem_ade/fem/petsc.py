@@ -32,6 +32,7 @@ PETSc options go in the environment variable ``PETSC_OPTIONS`` (PETSc reads it),
 
 from __future__ import annotations
 
+import functools
 import math
 from types import SimpleNamespace
 
@@ -42,7 +43,7 @@ from ..model import ModelError
 from . import mesh as fmesh
 from . import output
 from . import solve as fsolve
-from .assemble import periodic_1d
+from .assemble import periodic_1d, tensor_points
 from .backend import FEMBackend
 
 INSTALL_HINT = ("--linalg petsc needs petsc4py and mpi4py: run scripts/install-petsc.sh "
@@ -183,11 +184,10 @@ class TensorOperators:
         self.K = DistMatrix(part, local)
         w1 = [np.asarray(o[0].sum(axis=1)).ravel()[b] for o, b in zip(ones, part.box,
                                                                          strict=True)]
-        self.weights = np.ravel(w1[0] if d == 1 else np.einsum(
-            "i,j->ij", w1[0], w1[1]) if d == 2 else np.einsum("i,j,k->ijk", *w1))
-        locs = [o[2][b] for o, b in zip(ones, part.box, strict=True)]
-        grids = np.meshgrid(*locs, indexing="ij")
-        self.doflocs = np.stack([g.ravel() for g in grids])
+        self.weights = functools.reduce(np.multiply.outer, w1).ravel()  # M_L = ⊗ M_L,d
+        #: the 1D node locations of the whole mesh (the gathered fields' points)
+        self.locs = [o[2] for o in ones]
+        self.doflocs = tensor_points([x[b] for x, b in zip(self.locs, part.box, strict=True)])
         self.n_dofs = part.N
         self.M = None
         self.basis = None
@@ -440,10 +440,8 @@ class PETScFEMBackend(FEMBackend):
 
     # -- measurements on the gathered field ---------------------------------------------------
     def fields(self) -> dict[str, np.ndarray]:
-        locs = [periodic_1d(np.asarray(a, float), self.order)[2] for a in self.mesh.axes]
-        grids = np.meshgrid(*locs, indexing="ij")
         return {"phi": self.part.gather(self.phi), "mu": self.part.gather(self.mu),
-                "points": np.stack([g.ravel() for g in grids])}
+                "points": tensor_points(self.ops.locs)}
 
     def grid_phi(self) -> np.ndarray:
         return output.uniform_grid_field(self.mesh, self._view(), self.part.gather(self.phi),
