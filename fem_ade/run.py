@@ -162,21 +162,16 @@ def main(argv: list[str] | None = None) -> int:
     (removed at the end), and a failure on any rank ends all of them (MPI_Abort) with its
     exit code."""
     signal.signal(signal.SIGTERM, _interrupt)
-    if SIZE == 1:
-        try:
-            return _main(argv)
-        except KeyboardInterrupt:
-            print("fem_ade.run: interrupted", file=sys.stderr)
-            return EXIT_INTERRUPTED
-    import shutil
-    import tempfile
+    scratch = None
+    if RANK > 0:
+        import tempfile
 
-    scratch = tempfile.mkdtemp(prefix=f"fem_ade-rank{RANK}-")
+        scratch = tempfile.mkdtemp(prefix=f"fem_ade-rank{RANK}-")
     stdout = sys.stdout
     try:
-        if RANK > 0:
+        if scratch is not None:
             sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (closed below)
-        code = _main(argv, scratch=scratch if RANK > 0 else None)
+        code = _main(argv, scratch=scratch)
     except KeyboardInterrupt:
         if RANK == 0:
             print("fem_ade.run: interrupted", file=sys.stderr)
@@ -185,8 +180,11 @@ def main(argv: list[str] | None = None) -> int:
         if sys.stdout is not stdout:
             sys.stdout.close()
             sys.stdout = stdout
-        shutil.rmtree(scratch, ignore_errors=True)
-    if code not in (0,) and "mpi4py" in sys.modules:
+        if scratch is not None:
+            import shutil
+
+            shutil.rmtree(scratch, ignore_errors=True)
+    if code != 0 and SIZE > 1 and "mpi4py" in sys.modules:
         from mpi4py import MPI
 
         if MPI.Is_initialized() and not MPI.Is_finalized():
