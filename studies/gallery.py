@@ -152,6 +152,16 @@ def far_field(phi: np.ndarray, L: float, eps: float, far: float = 6.0) -> float:
     return float(np.median(phi[~near])) if (~near).any() else math.nan
 
 
+def read_shapes(folder: Path) -> list[dict]:
+    """The rows of a run's shapes.csv (``--shape-every``) as dicts of strings; [] without."""
+    path = folder / "shapes.csv"
+    if not path.is_file():
+        return []
+    lines = path.read_text().strip().splitlines()
+    head = lines[0].split(",") if lines else []
+    return [dict(zip(head, line.split(","), strict=True)) for line in lines[1:]]
+
+
 def analyse(folder: Path, scene) -> dict:
     """What the table needs from a finished run folder: the summary, the far field, the
     shapes along the way; written to analysis.json so the large files can go."""
@@ -164,11 +174,8 @@ def analyse(folder: Path, scene) -> dict:
         with np.load(final) as z:
             phi = np.array(z["phi_grid"] if "phi_grid" in z.files else z["phi"])
         out["far_field"] = far_field(phi, scene.params.L, scene.params.eps)
-    shapes = folder / "shapes.csv"
-    if shapes.is_file():
-        lines = shapes.read_text().splitlines()
-        head = lines[0].split(",")
-        out["shapes"] = [dict(zip(head, line.split(","), strict=True)) for line in lines[1:]]
+    if (folder / "shapes.csv").is_file():
+        out["shapes"] = read_shapes(folder)
     history = folder / "history.csv"
     if history.is_file():
         from fem_ade.output import read_history
@@ -288,11 +295,8 @@ def interrupted(root: Path, variant: str, backend: str, name: str) -> str | None
     from fem_ade.output import read_history
 
     steps = int(read_history(folder / "history.csv")["step"][-1])
-    label = "-"
-    if (folder / "shapes.csv").is_file():
-        rows = (folder / "shapes.csv").read_text().strip().splitlines()
-        if len(rows) > 1:
-            label = f"{rows[-1].split(',')[2]} at step {rows[-1].split(',')[0]}"
+    rows = read_shapes(folder)
+    label = f"{rows[-1]['label']} at step {rows[-1]['step']}" if rows else "-"
     return f"interrupted at step {steps} ({label}); resumable"
 
 
