@@ -179,3 +179,25 @@ def test_study_quick_mode(path, tmp_path, capsys):
     args = ARGS.get(path.stem, ["--quick"])
     result = module.main([*args, "--out", str(tmp_path)])
     check(result, tmp_path)
+
+
+def test_gallery_plan():
+    """The gallery's plan: d halves ε in the variant each scene's verdict rests on (b for the
+    discocyte, the seeded c for the torus), only on the spectral backend; the seedless ε = 0.05
+    scenes have no c and say why; --steps-a sets the paper recipe's length."""
+    gallery = _load(STUDIES / "gallery.py")
+    cases = gallery.plan(["discocyte", "torus", "biconcave"], ["spectral", "fem"],
+                         gallery.VARIANTS, quick=False, max_steps=300, steps_a=700)
+    by = {(c["variant"], c["backend"], c["scene"]): c["kwargs"] for c in cases}
+    assert by[("d", "spectral", "torus")]["ic"] == "seeded"
+    assert by[("d", "spectral", "torus")]["n"] == 128
+    assert "ic" not in by[("d", "spectral", "discocyte")]
+    assert not any(k[0] == "d" and k[1] == "fem" for k in by)
+    assert not any(k[0] == "d" and k[2] == "biconcave" for k in by)
+    assert ("c", "spectral", "biconcave") not in by
+    assert gallery.no_seed("c", "biconcave") and gallery.no_seed("c-loc", "cylinder")
+    assert gallery.no_seed("c", "torus") is None and gallery.no_seed("b", "biconcave") is None
+    assert by[("a", "fem", "torus")]["steps"] == 700
+    assert by[("b", "spectral", "torus")]["max_steps"] == 300
+    with pytest.raises(SystemExit):
+        gallery.main(["--steps-a", "0", "--report-only"])
