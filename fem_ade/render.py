@@ -145,13 +145,21 @@ def _render_vtk(S: Surface, size: tuple[int, int], view, slice_y: float,
         radius = 0.5 * float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
     else:
         centre, radius = S.origin + 0.5 * S.L, 0.5 * S.L
-    back, _, up = _view_vectors(view)
+    back, right, up = _view_vectors(view)
     p.camera.focal_point = tuple(centre)
     p.camera.position = tuple(centre + 4.0 * radius * back)
     p.camera.up = tuple(up)
     p.camera.view_angle = 30.0
     p.reset_camera()
-    p.camera.zoom(1.3)
+    # reset_camera fits the bounding sphere (height ≈ 2·radius); zoom in by up to 1.3, but
+    # only so far that the shape's extent across the view still fits (a chain along z
+    # would lose its ends at a fixed 1.3)
+    zoom = 1.3
+    if S.n_components:
+        tall = float(np.ptp(pts @ up))
+        wide = float(np.ptp(pts @ right)) * size[1] / size[0]
+        zoom = min(zoom, 0.92 * 2.0 * radius / max(tall, wide, 1e-12))
+    p.camera.zoom(max(zoom, 1.0))
     try:
         p.enable_anti_aliasing("ssaa")
     except Exception:  # noqa: BLE001 (anti-aliasing is cosmetic)
