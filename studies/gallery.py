@@ -216,6 +216,18 @@ def slim(folder: Path) -> None:
             pass
 
 
+def _stop_if_interrupted(folder: Path) -> None:
+    """A run stopped by a signal (Ctrl-C) keeps its checkpoint for the next sitting: it is
+    not analysed or slimmed, and the gallery stops."""
+    try:
+        status = json.loads((folder / "summary.json").read_text())["status"]
+    except (OSError, ValueError, KeyError):
+        return
+    if status == "interrupted":
+        print(f"  {folder}: interrupted; `studies/gallery.py` resumes it", flush=True)
+        raise KeyboardInterrupt
+
+
 def run_case(root: Path, case: dict, *, quiet: bool, keep: bool) -> dict:
     folder = case_dir(root, case)
     scene = scene_for(case)
@@ -224,12 +236,14 @@ def run_case(root: Path, case: dict, *, quiet: bool, keep: bool) -> dict:
         return json.loads((folder / "analysis.json").read_text())
     t0 = time.perf_counter()
     _run(scene, folder, case["kwargs"], quiet)
+    _stop_if_interrupted(folder)
     result = analyse(folder, scene)
     if case["variant"] != "a" and result["status"] == "steady":
         kick = folder / "kick"
         kw = dict(case["kwargs"], perturb=KICK[0], seed=KICK[1], phi0=str(folder),
                   ic="consistent")
         _run(scene, kick, kw, quiet)
+        _stop_if_interrupted(kick)
         analyse(kick, scene)
         if not keep:
             slim(kick)
@@ -277,7 +291,12 @@ def main(argv=None) -> dict:
             if path.is_file():
                 results[key] = json.loads(path.read_text())
             continue
-        results[key] = run_case(root, case, quiet=not args.verbose, keep=args.keep)
+        try:
+            results[key] = run_case(root, case, quiet=not args.verbose, keep=args.keep)
+        except KeyboardInterrupt:
+            print("gallery interrupted: finished runs are kept, the interrupted one resumes "
+                  "from its checkpoint next time", flush=True)
+            raise SystemExit(130) from None
     report = write_report(root, names, backends, args.variants, quick=quick)
     return {"results": results, "report": report}
 
@@ -309,7 +328,9 @@ def interrupted(root: Path, variant: str, backend: str, name: str) -> str | None
     steps = int(read_history(folder / "history.csv")["step"][-1])
     rows = read_shapes(folder)
     label = f"{rows[-1]['label']} at step {rows[-1]['step']}" if rows else "-"
-    return f"interrupted at step {steps} ({label}); resumable"
+    again = ("resumable" if (folder / "checkpoint.npz").is_file()
+             else "no checkpoint: a rerun starts again")
+    return f"interrupted at step {steps} ({label}); {again}"
 
 
 def no_seed(variant: str, name: str) -> str | None:
@@ -317,8 +338,7 @@ def no_seed(variant: str, name: str) -> str | None:
     from fem_ade.seeds import SIZES
 
     if variant in ("c", "c-loc") and name not in SIZES:
-        return ("no seed: at ε = 0.05 no shape of its family has diffuse V = α and A = β "
-                "(fem_ade/seeds.py)")
+        return "no seed at ε = 0.05 (fem_ade/seeds.py)"
     return None
 
 
@@ -328,22 +348,26 @@ def _label(a: dict | None) -> str:
 
 def verdict(a: dict | None, paper: str, variant: str) -> str:
     """reproduced / transient (window) / different steady shape (which) / not converged,
-    with the stability the kick showed."""
+    with the stability the kick showed. Variant a (a fixed number of steps at the paper's
+    Δt) is never called steady: its shape is reported at its final time, and a paper shape
+    seen only along the way as a transient."""
     if a is None:
         return "not run"
     label = _label(a)
     if a["status"] == "diverged":
         return f"diverged at step {a['steps']}"
-    if variant == "a":
+    if a["status"] == "interrupted":
+        return f"interrupted at step {a['steps']} ({label} there)"
+    if variant == "a":  # a fixed number of steps at the paper's Δt: never called steady
         seen = [r for r in a.get("shapes", []) if r["label"] == paper]
-        settled = a.get("last_rate", 1.0) < 1e-8
-        if label == paper:
-            return "reproduced" + ("" if settled else " (still evolving)")
+        t = f"t = {float(a['t']):.2g}"
+        if label == paper:  # the b criterion at 1/100 of b's Δt: TOL/100 per step
+            moving = a.get("last_rate", 1.0) > TOL / 100
+            return f"reproduced at {t}" + (" (still evolving)" if moving else " (steady)")
         if seen:
             t0, t1 = float(seen[0]["t"]), float(seen[-1]["t"])
-            return f"transient: {paper} for t in [{t0:.3g}, {t1:.3g}], then {label}"
-        return (f"different steady shape: {label}" if settled
-                else f"not converged ({label} at the end)")
+            return f"transient: {paper} for t in [{t0:.2g}, {t1:.2g}], then {label}"
+        return f"not seen by {t} ({label} at the end)"
     if a["status"] != "steady":
         return f"not converged ({label} after {a['steps']} steps)"
     kick = a.get("kick")
@@ -505,14 +529,18 @@ def montage(root: Path, data, names, backend, variants) -> Path | None:
                 with Image.open(cells[(n, v)]) as im:
                     w, h = im.size
                     ax.imshow(np.asarray(im.convert("RGB").crop((0, int(0.17 * h), w, h))))
-                ax.set_title(_label(data[(v, backend, n)]), fontsize=8)
+                a = data[(v, backend, n)]
+                status = {"diverged": f"diverged at step {a['steps']}",
+                          "interrupted": f"stopped at step {a['steps']}",
+                          "max_steps": f"at the cap, step {a['steps']}"}.get(a["status"])
+                ax.set_title(_label(a) + (f" ({status})" if status else ""), fontsize=8)
             if i == 0:
                 ax.text(0.5, 1.35, f"variant {v}", transform=ax.transAxes, ha="center",
                         fontsize=11, fontweight="bold")
             if j == 0:
                 ax.text(-0.05, 0.5, n, transform=ax.transAxes, ha="right", va="center",
                         fontsize=10, fontweight="bold")
-    fig.subplots_adjust(left=0.09, right=0.995, top=0.97, bottom=0.005, wspace=0.02,
+    fig.subplots_adjust(left=0.12, right=0.995, top=0.97, bottom=0.005, wspace=0.02,
                         hspace=0.25)
     path = root / f"montage-{backend}.png"
     fig.savefig(path)

@@ -201,3 +201,18 @@ def test_gallery_plan():
     assert by[("b", "spectral", "torus")]["max_steps"] == 300
     with pytest.raises(SystemExit):
         gallery.main(["--steps-a", "0", "--report-only"])
+
+
+def test_gallery_keeps_an_interrupted_run(tmp_path):
+    """A run stopped by Ctrl-C is not analysed or slimmed (its checkpoint stays for the next
+    sitting): the gallery stops instead."""
+    import json
+
+    gallery = _load(STUDIES / "gallery.py")
+    (tmp_path / "summary.json").write_text(json.dumps({"status": "interrupted"}))
+    (tmp_path / "checkpoint.npz").write_bytes(b"x")
+    with pytest.raises(KeyboardInterrupt):
+        gallery._stop_if_interrupted(tmp_path)
+    assert (tmp_path / "checkpoint.npz").is_file()
+    (tmp_path / "summary.json").write_text(json.dumps({"status": "steady"}))
+    gallery._stop_if_interrupted(tmp_path)  # a finished run goes on to its analysis
