@@ -502,6 +502,9 @@ def write_verdicts(verdicts: dict) -> None:
             if f"{v} ({b})" in entry["runs"]:
                 entry["headline"] = f"{v} ({b}): {entry['runs'][f'{v} ({b})']}"
                 break
+        paper = entry["runs"].get("a (spectral)", "")
+        if paper.startswith(("transient", "reproduced")):  # what the paper's recipe shows
+            entry["headline"] += f"; paper's recipe (a): {paper}"
         if "d (spectral)" in entry["runs"]:  # the sharp-interface check, where it ran
             entry["headline"] += f"; with eps halved (d): {entry['runs']['d (spectral)']}"
     VERDICTS.write_text(json.dumps(old, indent=1, sort_keys=True) + "\n")
