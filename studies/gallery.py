@@ -68,7 +68,6 @@ def plan(scene_names, backends, variants, quick: bool,
          max_steps: int = MAX_STEPS, steps_a: int | None = None) -> list[dict]:
     """The runs: one dict of simulate() keyword arguments (and bookkeeping) per case."""
     from fem_ade.scenes import PAPER_SCENES
-    from fem_ade.seeds import SIZES
 
     cases = []
     for name in scene_names:
@@ -77,7 +76,7 @@ def plan(scene_names, backends, variants, quick: bool,
             for backend in backends:
                 if variant == "d" and (backend != "spectral" or name not in SCENES_D):
                     continue
-                if variant in ("c", "c-loc") and name not in SIZES:
+                if no_seed(variant, name):
                     continue
                 n = scene.n * (2 if variant == "d" else 1)
                 if quick:
@@ -116,18 +115,27 @@ def scene_for(case: dict):
     return scene
 
 
+def run_dir(root: Path, variant: str, backend: str, name: str) -> Path:
+    return root / "runs" / variant / backend / name
+
+
 def case_dir(root: Path, case: dict) -> Path:
-    return root / "runs" / case["variant"] / case["backend"] / case["scene"]
+    return run_dir(root, case["variant"], case["backend"], case["scene"])
 
 
 FINISHED = ("completed", "steady", "max_steps", "diverged")
 
 
-def _finished(folder: Path) -> bool:
+def _status(folder: Path) -> str | None:
+    """The status in a run folder's summary.json (None before it has one)."""
     try:
-        return json.loads((folder / "summary.json").read_text())["status"] in FINISHED
+        return json.loads((folder / "summary.json").read_text())["status"]
     except (OSError, ValueError, KeyError):
-        return False
+        return None
+
+
+def _finished(folder: Path) -> bool:
+    return _status(folder) in FINISHED
 
 
 def _run(scene, folder: Path, kwargs: dict, quiet: bool):
@@ -219,11 +227,7 @@ def slim(folder: Path) -> None:
 def _stop_if_interrupted(folder: Path) -> None:
     """A run stopped by a signal (Ctrl-C) keeps its checkpoint for the next sitting: it is
     not analysed or slimmed, and the gallery stops."""
-    try:
-        status = json.loads((folder / "summary.json").read_text())["status"]
-    except (OSError, ValueError, KeyError):
-        return
-    if status == "interrupted":
+    if _status(folder) == "interrupted":
         print(f"  {folder}: interrupted; `studies/gallery.py` resumes it", flush=True)
         raise KeyboardInterrupt
 
@@ -305,7 +309,7 @@ def main(argv=None) -> dict:
 # the report: verdicts, tables, montages, phase diagram
 # ---------------------------------------------------------------------------------------
 def _load(root: Path, variant: str, backend: str, name: str) -> dict | None:
-    folder = root / "runs" / variant / backend / name
+    folder = run_dir(root, variant, backend, name)
     path = folder / "analysis.json"
     if not path.is_file():
         return None
@@ -320,7 +324,7 @@ def _load(root: Path, variant: str, backend: str, name: str) -> dict | None:
 def interrupted(root: Path, variant: str, backend: str, name: str) -> str | None:
     """The verdict of a run that was stopped before it finished (no analysis.json, a
     history): where it got to and the last shape recorded; None otherwise."""
-    folder = root / "runs" / variant / backend / name
+    folder = run_dir(root, variant, backend, name)
     if (folder / "analysis.json").is_file() or not (folder / "history.csv").is_file():
         return None
     from fem_ade.output import read_history

@@ -201,18 +201,30 @@ def test_gallery_plan():
     assert by[("b", "spectral", "torus")]["max_steps"] == 300
     with pytest.raises(SystemExit):
         gallery.main(["--steps-a", "0", "--report-only"])
+    # d is the sharp-interface check: ε halved, the reduced targets (v₀, Δa₀) the same
+    for name in ("discocyte", "torus"):
+        base = gallery.scene_for({"variant": "b", "scene": name}).params
+        half = gallery.scene_for({"variant": "d", "scene": name}).params
+        assert half.eps == pytest.approx(base.eps / 2)
+        assert half.reduced_targets() == pytest.approx(base.reduced_targets(), rel=1e-12)
 
 
-def test_gallery_keeps_an_interrupted_run(tmp_path):
+def test_gallery_keeps_an_interrupted_run(tmp_path, monkeypatch):
     """A run stopped by Ctrl-C is not analysed or slimmed (its checkpoint stays for the next
     sitting): the gallery stops instead."""
     import json
 
     gallery = _load(STUDIES / "gallery.py")
-    (tmp_path / "summary.json").write_text(json.dumps({"status": "interrupted"}))
-    (tmp_path / "checkpoint.npz").write_bytes(b"x")
+    case = gallery.plan(["discocyte"], ["spectral"], ["b"], quick=True)[0]
+    folder = gallery.case_dir(tmp_path, case)
+
+    def stopped_run(scene, where, kwargs, quiet):
+        where.mkdir(parents=True, exist_ok=True)
+        (where / "summary.json").write_text(json.dumps({"status": "interrupted"}))
+        (where / "checkpoint.npz").write_bytes(b"x")
+
+    monkeypatch.setattr(gallery, "_run", stopped_run)
     with pytest.raises(KeyboardInterrupt):
-        gallery._stop_if_interrupted(tmp_path)
-    assert (tmp_path / "checkpoint.npz").is_file()
-    (tmp_path / "summary.json").write_text(json.dumps({"status": "steady"}))
-    gallery._stop_if_interrupted(tmp_path)  # a finished run goes on to its analysis
+        gallery.run_case(tmp_path, case, quiet=True, keep=False)
+    assert (folder / "checkpoint.npz").is_file()
+    assert not (folder / "analysis.json").exists()
