@@ -169,18 +169,23 @@ def read_history(path: str | Path) -> dict[str, np.ndarray]:
     return {c: np.array([float(r[i]) for r in body]) for i, c in enumerate(header)}
 
 
-def truncate_history(path: str | Path, last_step: int) -> list[dict]:
-    """Drop the rows of history.csv after ``last_step`` (before a resumed run appends);
-    return the rows kept, as dicts of floats."""
+def truncate_csv(path: str | Path, last_step: int) -> list[dict[str, str]]:
+    """Drop the rows of a per-step CSV file (first column: step) after ``last_step``, before
+    a resumed run appends to it; return the rows kept, as dicts of strings."""
     path = Path(path)
     with open(path, newline="") as f:
         rows = list(csv.reader(f))
-    keep = [rows[0]] + [r for r in rows[1:] if int(r[0]) <= last_step]
+    keep = rows[:1] + [r for r in rows[1:] if int(r[0]) <= last_step]
     tmp = path.with_suffix(".csv.tmp")
     with open(tmp, "w", newline="") as f:
         csv.writer(f).writerows(keep)
     os.replace(tmp, path)
-    return [{c: float(v) for c, v in zip(rows[0], r, strict=True)} for r in keep[1:]]
+    return [dict(zip(rows[0], r, strict=True)) for r in keep[1:]]
+
+
+def truncate_history(path: str | Path, last_step: int) -> list[dict]:
+    """:func:`truncate_csv` for history.csv: the rows kept, as dicts of floats."""
+    return [{c: float(v) for c, v in r.items()} for r in truncate_csv(path, last_step)]
 
 
 def read_json(path: str | Path) -> dict:

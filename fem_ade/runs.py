@@ -32,6 +32,7 @@ from .output import (
     package_versions,
     prepare_out_dir,
     read_json,
+    truncate_csv,
     truncate_history,
     write_fields,
     write_json_atomic,
@@ -336,16 +337,33 @@ class _Series:
         self.xdmf.close()
 
 
+def _cell(text: str):
+    """A CSV cell back as the int or float it was written from; text stays text."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
 class _Shapes:
     """The shape descriptors along a run (``shape_every``): rows of OUT/shapes.csv."""
 
     COLUMNS = ("step", "t", "label", "components", "genus", "arms", "reduced_volume",
                "reduced_area_difference", "elongation", "flatness", "necks", "dimple")
 
-    def __init__(self, be: Backend, path: Path | None, monitor, append: bool):
+    def __init__(self, be: Backend, path: Path | None, monitor, resume_from: int | None):
+        """``resume_from``: the checkpoint's step when a run resumes. The rows from that step
+        on are dropped (the resumed loop observes its start again, and a run killed after
+        its last checkpoint recorded steps it will make again); the earlier ones are kept."""
         self.be, self.monitor, self.rows = be, monitor, []
         self.file = None
         if path is not None:
+            append = resume_from is not None and path.is_file()
+            if append:
+                self.rows = [{c: _cell(v) for c, v in r.items()}
+                             for r in truncate_csv(path, resume_from - 1)]
             self.file = open(path, "a" if append else "w")  # noqa: SIM115
             if not append:
                 self.file.write(",".join(self.COLUMNS) + "\n")
@@ -397,7 +415,8 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool, be: B
     observers = [(config["save_every"], series.save)] if series else []
     shapes = None
     if config.get("shape_every"):
-        shapes = _Shapes(be, out / "shapes.csv" if out else None, monitor, start is not None)
+        shapes = _Shapes(be, out / "shapes.csv" if out else None, monitor,
+                         start_ls.k if start_ls is not None else None)
         observers.append((config["shape_every"], shapes.observe))
     try:
         result = run_loop(

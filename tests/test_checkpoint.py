@@ -69,6 +69,27 @@ def test_resume_with_adaptive_dt_and_stabilized_scheme(cli, tmp_path):
     _same_run(whole, part)
 
 
+def test_resume_drops_rows_recorded_after_the_checkpoint(cli, tmp_path):
+    """A run killed after its last checkpoint (SIGTERM, a lost machine) has history and shape
+    rows past the checkpoint's step: the resumed run records those steps again, once."""
+    common = ["discocyte", "--n", "16", "--every", "5", "--shape-every", "5", "--quiet",
+              "--allow-underresolved", "--backend", "spectral", "--no-render"]
+    whole, part = tmp_path / "whole", tmp_path / "part"
+    assert cli([*common, "--steps", "30", "--out", whole]).returncode == 0
+    r = cli([*common, "--steps", "10", "--checkpoint-every", "10", "--out", part])
+    assert r.returncode == 0, r.stderr
+    for name in ("history.csv", "shapes.csv"):  # what steps 11-15 left before the kill
+        rows = (part / name).read_text().splitlines()
+        (part / name).write_text("\n".join([*rows, "15" + rows[-1][rows[-1].index(","):]])
+                                 + "\n")
+    assert cli(["--resume", part, "--steps", "30", "--quiet"]).returncode == 0
+    _same_run(whole, part)
+    steps = [int(line.split(",")[0]) for line in
+             (part / "shapes.csv").read_text().splitlines()[1:]]
+    assert steps == [0, 5, 10, 15, 20, 25, 30]
+    assert (part / "shapes.csv").read_text() == (whole / "shapes.csv").read_text()
+
+
 def test_sigint_writes_a_checkpoint_and_resumes(cli, tmp_path):
     out, whole = tmp_path / "int", tmp_path / "whole"
     args = ["discocyte", "--n", "24", "--steps", "4000", "--every", "10", "--quiet",
