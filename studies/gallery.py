@@ -360,8 +360,6 @@ def verdict(a: dict | None, paper: str, variant: str) -> str:
     label = _label(a)
     if a["status"] == "diverged":
         return f"diverged at step {a['steps']}"
-    if a["status"] == "interrupted":
-        return f"interrupted at step {a['steps']} ({label} there)"
     if variant == "a":  # a fixed number of steps at the paper's Δt: never called steady
         seen = [r for r in a.get("shapes", []) if r["label"] == paper]
         t = f"t = {float(a['t']):.2g}"
@@ -538,7 +536,6 @@ def montage(root: Path, data, names, backend, variants) -> Path | None:
                     ax.imshow(np.asarray(im.convert("RGB").crop((0, int(0.17 * h), w, h))))
                 a = data[(v, backend, n)]
                 status = {"diverged": f"diverged at step {a['steps']}",
-                          "interrupted": f"stopped at step {a['steps']}",
                           "max_steps": f"at the cap, step {a['steps']}"}.get(a["status"])
                 ax.set_title(_label(a) + (f" ({status})" if status else ""), fontsize=8)
             if i == 0:
