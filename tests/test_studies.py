@@ -147,6 +147,12 @@ def check_gallery(result, out):
     text = (out / "gallery.md").read_text()
     assert "| discocyte (Fig. 1) | discocyte |" in text
     assert (out / "montage-spectral.png").is_file()
+    # a later sitting that runs (here: reports) other cells keeps these in the report
+    gallery = _load(STUDIES / "gallery.py")
+    again = gallery.main(["--quick", "--report-only", "--scenes", "torus", "--out", str(out)])
+    assert again["report"]["verdicts"] == verdicts
+    text = (out / "gallery.md").read_text()
+    assert "| discocyte (Fig. 1) | discocyte |" in text and "| torus (Fig. 2) | torus |" in text
 
 
 def check_scaling(result, out):
