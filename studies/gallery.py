@@ -31,7 +31,9 @@ with summary.json, history.csv, shapes.csv, shape.png, analysis.json, and ``kick
 table ``gallery.md``, a montage per backend (``montage-BACKEND.png``: rows are scenes,
 columns variants) and the phase diagram ``phase-diagram.png``. Resumable: a finished run is
 skipped, an interrupted one resumes from its checkpoint; large files (final.npz, series,
-checkpoints) are deleted once a case is analysed (``--keep`` keeps them).
+checkpoints) are deleted once a case is analysed (``--keep`` keeps them). ``--scenes``,
+``--backend`` and ``--variants`` choose what runs; the report always covers every run
+analysed in the results folder.
 
     python studies/gallery.py                                # everything (hours)
     python studies/gallery.py --backend spectral --variants a b
