@@ -430,9 +430,9 @@ def _with_analysed(root: Path, names, backends, variants) -> tuple[list, list, l
 
     found = [p.parent.relative_to(root / "runs").parts
              for p in (root / "runs").glob("*/*/*/analysis.json")]
-    ns, bs, vs = (set(names), set(backends), set(variants))
-    for v, b, n in found:
-        ns.add(n), bs.add(b), vs.add(v)
+    vs = set(variants) | {v for v, _, _ in found}
+    bs = set(backends) | {b for _, b, _ in found}
+    ns = set(names) | {n for _, _, n in found}
     return ([n for n in PAPER_SCENES if n in ns], [b for b in BACKENDS if b in bs],
             [v for v in VARIANTS if v in vs])
 
