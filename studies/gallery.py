@@ -428,8 +428,8 @@ def _with_analysed(root: Path, names, backends, variants) -> tuple[list, list, l
     those cells alone."""
     from fem_ade.scenes import PAPER_SCENES
 
-    found = [p.parent.relative_to(root / "runs").parts
-             for p in (root / "runs").glob("*/*/*/analysis.json")]
+    found = [(v, b, n) for v in VARIANTS for b in BACKENDS for n in PAPER_SCENES
+             if (run_dir(root, v, b, n) / "analysis.json").is_file()]
     vs = set(variants) | {v for v, _, _ in found}
     bs = set(backends) | {b for _, b, _ in found}
     ns = set(names) | {n for _, _, n in found}
