@@ -448,15 +448,55 @@ def load_grid_field(path: str | Path) -> np.ndarray:
     return check_grid_field(phi, f"the field in {path}")
 
 
+def tensor_axes(points: np.ndarray):
+    """The 1D coordinates whose tensor grid (C order) ``points`` (dim, N) is, or None."""
+    points = np.asarray(points, dtype=float).reshape(np.shape(points)[0], -1)
+    axes = [np.unique(x) for x in points]
+    if int(np.prod([len(a) for a in axes])) != points.shape[1]:
+        return None
+    grids = np.meshgrid(*axes, indexing="ij")
+    if all(np.array_equal(g.ravel(), x) for g, x in zip(grids, points, strict=True)):
+        return axes
+    return None
+
+
 def resample_periodic(grid: np.ndarray, L: float, points: np.ndarray) -> np.ndarray:
     """Values of the periodic grid field ``grid`` (node j at jL/m) at ``points`` (dim, ...):
-    cubic-spline interpolation, exact at the grid nodes."""
+    its trigonometric interpolant where the points form a tensor grid (every backend's nodes
+    on a tensor mesh: a smooth field moves between resolutions and between the spectral
+    grid and GLL nodes to round-off, :func:`resample_fourier`), else cubic-spline
+    interpolation (exact at the grid nodes)."""
     from scipy import ndimage
 
+    axes = tensor_axes(points)
+    if axes is not None:
+        return resample_fourier(grid, L, axes).reshape(np.shape(points)[1:])
     m = grid.shape[0]
     coords = np.asarray(points, dtype=float).reshape(grid.ndim, -1) * (m / L)
     values = ndimage.map_coordinates(grid, coords, order=3, mode="grid-wrap")
     return values.reshape(np.shape(points)[1:])
+
+
+def resample_fourier(grid: np.ndarray, L: float, axes) -> np.ndarray:
+    """The trigonometric interpolant of the periodic grid field ``grid`` (node j at jL/m) on
+    the tensor grid of the 1D points ``axes`` (one array per dimension; C order): exact for
+    the grid's own Fourier modes, so a resolved smooth field moves between grids to round-off
+    (a spectral state onto a FEM's GLL nodes, ``studies/convergence.py``). One dense 1D
+    matrix per axis, applied along it."""
+    grid = np.asarray(grid, dtype=float)
+    out = grid.astype(complex)
+    for a, x in enumerate(axes):
+        m = grid.shape[a]
+        k = np.fft.fftfreq(m, d=1.0 / m)
+        if m % 2 == 0:
+            k[m // 2] = 0.0  # the Nyquist mode as cos: drop its sine part (real interpolant)
+        F = np.fft.fft(np.eye(m), axis=0) / m  # coefficients from values
+        E = np.exp(2j * np.pi * np.outer(np.asarray(x, dtype=float) / L, k))
+        if m % 2 == 0:
+            E[:, m // 2] = np.cos(np.pi * m * np.asarray(x, dtype=float) / L)
+        T = E @ F  # (len(x), m)
+        out = np.moveaxis(np.tensordot(T, np.moveaxis(out, a, 0), axes=(1, 0)), 0, a)
+    return out.real
 
 
 # ---------------------------------------------------------------------------------------------

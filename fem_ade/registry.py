@@ -48,8 +48,12 @@ RECIPE_SETTINGS = {
                "accelerate": True, "until_steady": 1e-9, "max_steps": 20000},
 }
 
-#: preconditioners of the FEM step solve (fem_ade.fem.solve)
-FEM_SOLVERS = ("amg", "chebyshev", "jacobi", "fft", "auto")
+#: how the FEM step's system is solved (fem_ade.fem.solve): exactly by fast diagonalization
+#: (fdm; fft is fdm where it uses the FFT), or by PCG with an AMG, Chebyshev or Jacobi
+#: preconditioner
+FEM_SOLVERS = ("auto", "fdm", "fft", "amg", "chebyshev", "jacobi")
+#: the FEM's element orders (GLL nodes): any of these on a tensor mesh, 1 or 2 on a mesh file
+FEM_ORDERS = tuple(range(1, 17))
 #: the FEM's linear algebra: one process (NumPy, SciPy, pyamg) or PETSc over MPI ranks
 LINALGS = ("numpy", "petsc")
 
@@ -84,18 +88,23 @@ BACKENDS = {
         "fem", "fem_ade.fem.backend:FEMBackend",
         "mixed (phi, mu) periodic finite elements on hexahedra (quads in 2D)",
         (
-            Option("order", int, 1, (1, 2), "Q1 or Q2 elements (default 1)"),
+            Option("order", int, 1, None,
+                   "element order p, 1 to 16 (default 1): Lagrange elements with their nodes "
+                   "at the Gauss-Lobatto-Legendre points, --n cells per axis, so p*n nodes per "
+                   "axis; a mesh file takes 1 or 2"),
             Option("mesh", str, None, None,
                    "a periodic hexahedral mesh file (read with meshio), or graded[:g] for a "
                    "graded tensor mesh (default: uniform, n cells per direction)"),
             Option("solver", str, "auto", FEM_SOLVERS,
-                   "how the step's system is solved: auto (default: fft on uniform Q1 meshes, "
-                   "else chebyshev where the system is mass-dominated on a uniform mesh, else "
-                   "amg); fft (uniform Q1 only: the same FEM system solved exactly in Fourier "
-                   "space); PCG preconditioned by amg (flat iteration counts in h and dt), "
-                   "chebyshev or jacobi"),
+                   "how the step's system is solved: auto (default: fdm on tensor meshes, "
+                   "else chebyshev where the system is mass-dominated on near-uniform cells, "
+                   "else amg); fdm (tensor meshes: exact, by fast diagonalization); fft (fdm "
+                   "on order 1, uniform: by the FFT); PCG preconditioned by amg (on the "
+                   "low-order refined operator for p > 1: flat iteration counts in h, p and "
+                   "dt), chebyshev or jacobi"),
             Option("rtol", float, None, None,
-                   "PCG tolerance relative to the step's initial residual (default 1e-6)"),
+                   "PCG tolerance relative to the step's initial residual (default 1e-6; "
+                   "the exact solvers fdm and fft take none)"),
             Option("linalg", str, "numpy", LINALGS,
                    "numpy (default: one process) or petsc (PETSc KSP + hypre/GAMG, the mesh "
                    "distributed over the ranks of mpirun; README 'Running on a cluster')"),

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 import warnings
 from dataclasses import asdict
 from pathlib import Path
@@ -188,10 +189,12 @@ def simulate(
 def build_backend(scene: Scene, config: dict, state: dict | None = None) -> Backend:
     """The run's backend (its initial field checked: finite, with an inside), or from a
     checkpoint's ``state``."""
+    c0 = time.process_time()
     be = make_backend(config["backend"], scene, n=config["n"], ic=config["ic"],
                       perturb=config["perturb"], seed=config["seed"], scheme=config["scheme"],
                       constraints=config["constraints"], start_state=state,
                       **config["backend_options"])
+    be.setup_cpu_s = time.process_time() - c0  # the set-up's CPU time (summary.json)
     phi = be.fields()["phi"]
     if not np.all(np.isfinite(phi)):
         raise ModelError("the initial field is not finite" if state is None else
@@ -207,7 +210,6 @@ def default_out(scene_name: str, backend: str) -> Path:
     """A new folder name under runs/: the scene, the backend, the time and a random suffix
     (two runs started in the same second never share one; the folder is made fresh)."""
     import secrets
-    import time
 
     stamp = time.strftime("%Y%m%d-%H%M%S")
     return Path("runs") / f"{scene_name}-{backend}-{stamp}-{secrets.token_hex(2)}"
@@ -492,6 +494,8 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict, series, gri
         "shape": result.shape,
         "verdict": verdict(be.scene, result.shape),
         "wall_s": result.wall_s,
+        "cpu_s": result.cpu_s,
+        "setup_cpu_s": getattr(be, "setup_cpu_s", None),
         "versions": package_versions(),
     }
     write_json_atomic(out / "summary.json", summary)

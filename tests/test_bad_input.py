@@ -277,10 +277,11 @@ def test_interrupt_while_drawing_leaves_a_consistent_folder(tmp_path, capsys, mo
 
 
 def test_signal_during_set_up_is_one_line(tmp_path):
-    """SIGINT while the FEM's AMG hierarchy is built (64³: seconds): one line, exit 130."""
+    """SIGINT while the FEM's AMG hierarchy is built (64³ with --solver amg: seconds; the
+    default exact solve sets up in 0.1 s): one line, exit 130."""
     out = tmp_path / "S"
     proc = subprocess.Popen([sys.executable, "-m", "fem_ade.run", "discocyte", "--n", "64",
-                             "--steps", "5", "--out", str(out), "--quiet"],
+                             "--solver", "amg", "--steps", "5", "--out", str(out), "--quiet"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(2.0)
     proc.send_signal(signal.SIGINT)

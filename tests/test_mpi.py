@@ -39,6 +39,8 @@ CASES = {
                    "--scheme", "stabilized", "--dt", "5e-5"],
     "exact": ["--n", "24", "--allow-underresolved", "--steps", "10",
               "--scheme", "stabilized", "--dt", "5e-5", "--constraints", "exact"],
+    "order-3": ["--order", "3", "--n", "8", "--allow-underresolved", "--steps", "10",
+                "--scheme", "stabilized", "--dt", "5e-5", "--constraints", "exact"],
 }
 
 

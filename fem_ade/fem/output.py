@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .assemble import Operators, periodic_1d
 from .mesh import PeriodicMesh
 
 
@@ -26,10 +25,10 @@ def _grid_cells(shape):
     return "hexahedron", np.stack([q.ravel() for q in corners], axis=1)
 
 
-def closed_mesh(mesh: PeriodicMesh, ops: Operators):
+def closed_mesh(mesh: PeriodicMesh, space):
     """(points (P, 3), [(cell type, connectivity)], index (P,) into the DOF vector)."""
-    if ops.assembly == "kron":
-        locs = [periodic_1d(np.asarray(a, float), ops.order)[2] for a in mesh.axes]
+    if space.axes is not None:
+        locs = space.node_axes
         closed = [np.append(x, a[-1]) for x, a in zip(locs, mesh.axes, strict=True)]
         grids = np.meshgrid(*closed, indexing="ij")
         points = np.stack([g.ravel() for g in grids], axis=1)
@@ -45,33 +44,30 @@ def closed_mesh(mesh: PeriodicMesh, ops: Operators):
         mio = to_meshio(sm._orig)
         points = mio.points
         kind, cells = mio.cells[0].type, mio.cells[0].data
-        index = ops.basis.nodal_dofs[0][sm._ix]
+        index = space.basis.nodal_dofs[0][sm._ix]
     if points.shape[1] == 2:
         points = np.column_stack([points, np.zeros(len(points))])
     return points, [(kind, cells)], index
 
 
-def uniform_grid_field(mesh: PeriodicMesh, ops: Operators, values: np.ndarray, m: int):
+def uniform_grid_field(mesh: PeriodicMesh, space, values: np.ndarray, m: int):
     """(field on the uniform periodic grid x_j = jL/m, shape (m,)*dim; the 1D coordinates x).
 
-    Uniform tensor meshes with m = order·n: the DOF grid itself (a reshape). Other tensor
-    meshes: multilinear interpolation of the nodal values; file meshes: linear interpolation
-    of the nodal values over their periodically padded point cloud.
+    Tensor meshes: the element's own interpolant (exact to its order: sum-factorized 1D
+    Lagrange interpolation), the nodes themselves when they are that grid (p = 1, uniform,
+    m = n); file meshes: linear interpolation of the nodal values over their periodically
+    padded point cloud.
     """
-    from scipy.interpolate import LinearNDInterpolator, RegularGridInterpolator
+    from scipy.interpolate import LinearNDInterpolator
 
     L, dim = mesh.L, mesh.dim
     x = np.arange(m) * (L / m)
-    if ops.assembly == "kron":
-        locs = [periodic_1d(np.asarray(a, float), ops.order)[2] for a in mesh.axes]
-        grid = values.reshape([len(v) for v in locs])
-        if mesh.kind == "uniform" and all(len(v) == m for v in locs):
-            return grid.copy(), x
-        closed = [np.append(v, L) for v in locs]
-        padded = np.pad(grid, [(0, 1)] * dim, mode="wrap")
-        target = np.stack(np.meshgrid(*[x] * dim, indexing="ij"), axis=-1)
-        return RegularGridInterpolator(closed, padded)(target), x
-    pts, _, index = closed_mesh(mesh, ops)
+    if space.axes is not None:
+        if space.circulant and all(n == m for n in space.shape) and \
+                all(abs(a.nodes[0]) < 1e-14 * L for a in space.axes):
+            return np.reshape(values, space.shape).copy(), x
+        return space.interpolate_to([x] * dim)(values), x
+    pts, _, index = closed_mesh(mesh, space)
     target = np.stack(np.meshgrid(*[x] * dim, indexing="ij"), axis=-1)
     interp = LinearNDInterpolator(pts[:, :dim], values[index])
     return interp(target), x

@@ -3,19 +3,21 @@
 The same mixed step as :mod:`fem_ade.fem.step` — the same :class:`~fem_ade.fem.step.MixedStep`
 code, the same weak forms — with three things swapped:
 
-* **the partition**: the DOF grid of a tensor mesh (uniform or graded, Q1 or Q2) is split
-  by a PETSc DMDA (periodic, box stencil of width = order) into one box per rank. A rank
-  holds φ, μ, Kφ, the lumped weights and the DOF coordinates of its box only, as NumPy arrays
-  (the DMDA's natural ordering is the serial backend's C ordering, so the gathered field is
-  the serial one, index for index);
-* **the matrices**: each rank assembles its own rows of K (and of M_L + sK for the
-  preconditioner) from the 1D periodic matrices, as the serial Kronecker assembly does
-  (:func:`fem_ade.fem.assemble.periodic_1d`), into a PETSc MPIAIJ matrix;
+* **the partition**: the node grid of a tensor mesh (uniform or graded, any order) is split
+  by a PETSc DMDA (periodic, stencil width = order) into one box per rank. A rank holds φ,
+  μ, Kφ, the GLL weights and the DOF coordinates of its box only, as NumPy arrays (the
+  DMDA's natural ordering is the serial backend's C ordering, so the gathered field is the
+  serial one, index for index);
+* **the matrices**: each rank assembles its own rows of K = Σₖ K₁⁽ᵏ⁾ ⊗ (⊗ diag(w)) — along
+  each grid line the 1D band of the serial :class:`fem_ade.fem.tensor.Axis` — and of the
+  low-order refined K̃ (p = 1 on the same nodes) for the preconditioner, into PETSc MPIAIJ
+  matrices;
 * **the solve**: the step's CG runs as a PETSc KSP (``-step_ksp_*``) on a matrix-free S
   (two MatMults per application, the rank-one terms as global dot products) with a shell
-  preconditioner P⁻¹ = τ (M_L + sK)⁻¹ M_L (M_L + sK)⁻¹ whose two inner solves are one
-  application of a PETSc preconditioner of M_L + sK (``-step_inner_pc_*``; default hypre
-  BoomerAMG where PETSc has it, else GAMG), the serial path's pyamg V-cycle.
+  preconditioner P⁻¹ = τ (W + sK̃)⁻¹ W (W + sK̃)⁻¹ whose two inner solves are one
+  application of a PETSc preconditioner of W + sK̃ (``-step_inner_pc_*``; default hypre
+  BoomerAMG where PETSc has it, else GAMG), the serial path's pyamg V-cycle. (The serial
+  default, the exact fast diagonalization, needs whole grid lines on one rank.)
 
 Every global sum of the forms (V, A, ΔA, E and the CG's dot products) is one MPI
 allreduce (:data:`fem_ade.fem.solve._ALLREDUCE`). The driver is unchanged: every rank runs
@@ -34,7 +36,6 @@ from __future__ import annotations
 
 import functools
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import scipy.sparse as sp
@@ -43,8 +44,9 @@ from ..model import ModelError
 from . import mesh as fmesh
 from . import output
 from . import solve as fsolve
-from .assemble import periodic_1d, tensor_points
+from .assemble import tensor_points
 from .backend import FEMBackend
+from .tensor import TensorSpace
 
 INSTALL_HINT = ("--linalg petsc needs petsc4py and mpi4py: run scripts/install-petsc.sh "
                 "(apt-get install petsc-dev, then pip install -e '.[mpi]' with PETSC_DIR set)")
@@ -139,58 +141,76 @@ def _band(A: sp.csr_matrix, rows: slice):
     return cols, vals
 
 
-class TensorOperators:
-    """This rank's rows of K, its lumped weights and DOF coordinates on a tensor mesh: the
-    serial Kronecker assembly restricted to the rank's box (``K = Σ_d ⊗ (K_d or M_d)``)."""
+def _line_matrix(part: Partition, axes) -> sp.csr_matrix:
+    """This rank's rows of K = Σₖ K₁⁽ᵏ⁾ ⊗ (⊗_{a≠k} diag(wₐ)) (``axes``: the 1D
+    :class:`fem_ade.fem.tensor.Axis` of the mesh), in PETSc's global numbering: along each
+    axis the 1D band of K₁, scaled by the other axes' weights."""
+    d, shape = len(part.shape), part.shape
+    strides = np.cumprod((1,) + tuple(reversed(shape[1:])))[::-1]
+    index = [np.arange(b.start, b.stop) for b in part.box]
+    rows, cols, vals = [], [], []
+    local_rows = np.arange(part.n_local).reshape(part.local_shape)
+    for k in range(d):
+        ck, vk = _band(axes[k].stiffness, part.box[k])  # (len_k, width)
+        col = 0
+        val = 1.0
+        for a in range(d):
+            view = [np.newaxis] * (d + 1)
+            view[a] = slice(None)
+            if a == k:
+                view[d] = slice(None)
+                col = col + (ck * int(strides[a]))[tuple(view)]
+                val = val * vk[tuple(view)]
+            else:
+                col = col + (index[a] * int(strides[a]))[tuple(view)]
+                val = val * axes[a].weights[part.box[a]][tuple(view)]
+        col, val = np.broadcast_arrays(col, val)
+        rows.append(np.broadcast_to(local_rows[..., None], col.shape).ravel())
+        cols.append(col.ravel())
+        vals.append(val.ravel())
+    cols = np.asarray(part.ao.app2petsc(np.concatenate(cols).astype(part.PETSc.IntType)))
+    local = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), cols.astype(np.int64))),
+                          shape=(part.n_local, part.N))
+    local.sum_duplicates()  # the padding (value 0) onto its row's first column
+    local.eliminate_zeros()
+    local.sort_indices()
+    return local
 
-    assembly = "kron"
+
+class TensorOperators:
+    """This rank's rows of K, its GLL weights and DOF coordinates on a tensor mesh (the serial
+    :class:`fem_ade.fem.tensor.TensorSpace` restricted to the rank's box), and the rows of the
+    low-order refined K̃ that the inner preconditioner works on (K itself for p = 1)."""
+
+    assembly = "tensor"
+    axes = None  # no fast diagonalization across ranks: the solve is PETSc's CG
+    basis = None
 
     def __init__(self, mesh, order: int):
-        ones = [periodic_1d(np.asarray(a, float), order) for a in mesh.axes]
-        shape = tuple(len(o[2]) for o in ones)
-        self.part = Partition(shape, width=order)
+        serial = TensorSpace(mesh.axes, order)
+        self.part = Partition(serial.shape, width=order)
         self.order = order
-        part, d = self.part, len(shape)
-        bands = [(_band(o[0], b), _band(o[1], b)) for o, b in zip(ones, part.box, strict=True)]
-        # global (natural = serial C order) column index of every (row, neighbour) pair
-        strides = np.cumprod((1,) + tuple(reversed(shape[1:])))[::-1]
-        cols = 0
-        for a in range(d):
-            c = bands[a][0][0]  # (len_a, width_a)
-            view = [np.newaxis] * (2 * d)
-            view[2 * a], view[2 * a + 1] = slice(None), slice(None)
-            cols = cols + (c * int(strides[a]))[tuple(view)]
-        vals = 0
-        for k in range(d):  # K = sum over axes of K on that axis, M on the others
-            term = 1
-            for a in range(d):
-                v = bands[a][1][1] if a == k else bands[a][0][1]
-                view = [np.newaxis] * (2 * d)
-                view[2 * a], view[2 * a + 1] = slice(None), slice(None)
-                term = term * v[tuple(view)]
-            vals = vals + term
-        cols, vals = np.broadcast_arrays(cols, vals)
-        width = int(np.prod([bands[a][0][0].shape[1] for a in range(d)]))
-        # rows in C order over the box: reorder (l0, w0, l1, w1, ...) to (l0, l1, .., w0, w1, ..)
-        perm = [2 * a for a in range(d)] + [2 * a + 1 for a in range(d)]
-        cols = np.transpose(cols, perm).reshape(part.n_local, width)
-        vals = np.transpose(vals, perm).reshape(part.n_local, width)
-        petsc_cols = np.asarray(part.ao.app2petsc(cols.ravel().astype(part.PETSc.IntType)))
-        local = sp.csr_matrix(
-            (vals.ravel(), petsc_cols.astype(np.int64),
-             np.arange(0, part.n_local * width + 1, width)), shape=(part.n_local, part.N))
-        local.sum_duplicates()  # the padding (value 0) onto its row's first column
-        local.sort_indices()
-        self.K = DistMatrix(part, local)
-        w1 = [np.asarray(o[0].sum(axis=1)).ravel()[b] for o, b in zip(ones, part.box,
-                                                                         strict=True)]
-        self.weights = functools.reduce(np.multiply.outer, w1).ravel()  # M_L = ⊗ M_L,d
+        part = self.part
+        self.K = DistMatrix(part, _line_matrix(part, serial.axes))
+        self.K_tilde = (self.K if order == 1 else
+                        DistMatrix(part, _line_matrix(part, serial.lor().axes)))
+        w1 = [a.weights[b] for a, b in zip(serial.axes, part.box, strict=True)]
+        self.weights = functools.reduce(np.multiply.outer, w1).ravel()  # W = ⊗ wₐ
         #: the 1D node locations of the whole mesh (the gathered fields' points)
-        self.locs = [o[2] for o in ones]
+        self.locs = serial.node_axes
         self.doflocs = tensor_points([x[b] for x, b in zip(self.locs, part.box, strict=True)])
         self.n_dofs = part.N
-        self.M = None
-        self.basis = None
+        self.serial = serial  # 1D data only (for the gathered fields' output)
+
+    def laplacian(self, x):
+        """μ = W⁻¹Kx on this rank's DOFs."""
+        return (self.K @ x) / self.weights
+
+    def preconditioner_stiffness(self):
+        return self.K_tilde
+
+    def describe(self) -> dict:
+        return self.serial.describe()
 
 
 class DistMatrix:
@@ -227,38 +247,40 @@ class DistMatrix:
 
 
 class PetscStepSolver:
-    """:class:`fem_ade.fem.solve.StepSolver` on PETSc: S x = b by KSP CG (matrix-free S,
-    shell preconditioner P⁻¹ = τ B⁻¹ M_L B⁻¹, B = M_L + sK by one PETSc PC application)."""
+    """The solver interface of :mod:`fem_ade.fem.solve` on PETSc: Ŝx = r by KSP CG (matrix-free
+    S, the rank-one terms as global dot products, shell preconditioner P⁻¹ = τ B⁻¹ W B⁻¹,
+    B = W + sK̃ by one PETSc PC application)."""
 
-    def __init__(self, M, K: DistMatrix, m, *, dt, kappa, eps, kind="amg", rtol=None,
-                 degree=None, grid=None, s0=0.0, s2=0.0, cache=None, lumped=True):
-        if not lumped:
-            raise ModelError("--linalg petsc takes the lumped mass only")
-        PETSc, part = K.part.PETSc, K.part
-        self.part, self.K = part, K
-        self.tau = dt if s0 == 0.0 else 1.0 / (1.0 / dt + s0)
-        self.c = s2 - 2.0 * kappa / eps
-        if s0 != 0.0 or s2 != 0.0:
-            s_opt = fsolve.preconditioner_shift(self.tau, self.c, kappa * eps)
-            grid_ratio = fsolve.SHIFT_GRID
-            self.s = grid_ratio ** round(math.log(s_opt) / math.log(grid_ratio))
-        else:
-            self.s = math.sqrt(dt * kappa * eps)
+    def __init__(self, space: TensorOperators, S, *, kind="amg", rtol=None,
+                 stabilized=False, cache=None):
+        PETSc, part = space.part.PETSc, space.part
+        self.part, self.K, self.S = part, space.K, S
+        self.tau, self.c, self.ke = S.tau, S.c, S.ke
+        self.s = S.shift(stabilized)
         self.kind = {"auto": "amg", "chebyshev": "amg"}.get(kind, kind)
         self.rtol = fsolve.DEFAULT_RTOL if rtol is None else float(rtol)
-        self.ke, self.dt = kappa * eps, dt
-        self.m = np.ascontiguousarray(m, dtype=float)
+        self.m = np.ascontiguousarray(space.weights, dtype=float)
         self.minv = 1.0 / self.m
         self.mv, self.minvv = part.vec(self.m.copy()), part.vec(self.minv.copy())
         key = ("petsc", self.kind, self.s)
+        self.high_order = space.order > 1
         if cache is not None and key in cache:
             self.inner, self.B = cache[key]
         else:
-            self.B = K.shifted(self.s, self.m)
+            # B = W + sK̃ for the PC; for p > 1 the inner solve is INNER_ITERATIONS CG
+            # iterations on the high-order W + sK preconditioned by it (as the serial path)
+            self.B = space.preconditioner_stiffness().shifted(self.s, self.m)
             self.inner = PETSc.KSP().create(comm=part.comm)
             self.inner.setOptionsPrefix("step_inner_")
-            self.inner.setOperators(self.B.mat)
-            self.inner.setType("preonly")
+            if self.high_order:
+                self.B_high = space.K.shifted(self.s, self.m)
+                self.inner.setOperators(self.B_high.mat, self.B.mat)
+                self.inner.setType("cg")
+                self.inner.setNormType(PETSc.KSP.NormType.NONE)
+                self.inner.setTolerances(rtol=0.0, atol=0.0, max_it=fsolve.INNER_ITERATIONS)
+            else:
+                self.inner.setOperators(self.B.mat)
+                self.inner.setType("preonly")
             pc = self.inner.getPC()
             if self.kind == "jacobi":
                 pc.setType("jacobi")
@@ -277,13 +299,13 @@ class PetscStepSolver:
         self.levels = None
         self.low_rank = ()
         self._t1, self._t2, self._y = part.vec(), part.vec(), part.vec()
-        self.S = PETSc.Mat().createPython(((part.n_local, part.N), (part.n_local, part.N)),
-                                          context=_ShellS(self), comm=part.comm)
-        self.S.setUp()
+        self.S_mat = PETSc.Mat().createPython(((part.n_local, part.N), (part.n_local, part.N)),
+                                              context=_ShellS(self), comm=part.comm)
+        self.S_mat.setUp()
         self.ksp = PETSc.KSP().create(comm=part.comm)
         self.ksp.setOptionsPrefix("step_")
-        self.ksp.setOperators(self.S)
-        self.ksp.setType("cg")
+        self.ksp.setOperators(self.S_mat)
+        self.ksp.setType("fcg" if self.high_order else "cg")  # inner iterations: flexible
         self.ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
         pc = self.ksp.getPC()
         pc.setType("python")
@@ -292,7 +314,7 @@ class PetscStepSolver:
         self.ksp.setFromOptions()
         self._b, self._x = part.vec(), part.vec()
 
-    # S x = (m/τ) x + K (c x + κε M_L⁻¹ K x) + Σ σ b (b·x)
+    # S x = (m/τ) x + K (c x + κε W⁻¹ K x) + Σ σ b (b·x)
     def mult(self, x, y):
         self.K.mat.mult(x, self._t1)
         self._t1.pointwiseMult(self._t1, self.minvv)
@@ -310,24 +332,33 @@ class PetscStepSolver:
         self.inner.solve(self._y, z)
         z.scale(self.tau)
 
-    def solve(self, b, x0, ref=None, scale=None, low_rank=()):
-        """(x, its): ‖b − Ŝx‖ ≤ rtol·scale, as :meth:`fem_ade.fem.solve.StepSolver.solve`."""
+    def solve(self, rhs, x0=None, scales=None, low_rank=()):
+        """([x with ‖r − Ŝx‖ ≤ rtol·scale], total its), as
+        :meth:`fem_ade.fem.solve.KrylovSolver.solve`."""
         self.low_rank = [(sig, self.part.vec(np.ascontiguousarray(v, dtype=float)))
                          for sig, v in low_rank]
-        self._b.setArray(np.asarray(b, dtype=float))
-        self._x.setArray(np.asarray(x0, dtype=float))
-        if scale is None:
-            ref = x0 if ref is None else ref
-            r = self._b.copy()
-            xr = self.part.vec(np.ascontiguousarray(ref, dtype=float))
-            self.mult(xr, self._y)
-            r.axpy(-1.0, self._y)
-            scale = r.norm()
-        if scale == 0.0:
-            return np.array(ref if ref is not None else x0, dtype=float, copy=True), 0
-        self.ksp.setTolerances(rtol=1e-300, atol=self.rtol * scale, max_it=500)
-        self.ksp.solve(self._b, self._x)
-        return self._x.getArray().copy(), int(self.ksp.getIterationNumber())
+        xs, total = [], 0
+        for j, r in enumerate(rhs):
+            start = np.zeros_like(r) if x0 is None or x0[j] is None else x0[j]
+            scale = fsolve.norm(r) if scales is None or scales[j] is None else scales[j]
+            if scale == 0.0:
+                xs.append(np.zeros_like(r))
+                continue
+            self._b.setArray(np.asarray(r, dtype=float))
+            self._x.setArray(np.asarray(start, dtype=float))
+            self.ksp.setTolerances(rtol=1e-300, atol=self.rtol * scale, max_it=500)
+            self.ksp.solve(self._b, self._x)
+            xs.append(self._x.getArray().copy())
+            total += int(self.ksp.getIterationNumber())
+        return xs, total
+
+
+def petsc_solver(kind, space, S, *, rtol=None, stabilized=False, cache=None, eigenbasis=None):
+    """:func:`fem_ade.fem.solve.make_solver` for ``--linalg petsc`` (PCG only)."""
+    if kind in fsolve.EXACT:
+        raise ModelError("--linalg petsc solves by PCG: --solver fdm/fft are the serial exact "
+                         "solvers (use amg, jacobi or auto)")
+    return PetscStepSolver(space, S, kind=kind, rtol=rtol, stabilized=stabilized, cache=cache)
 
 
 #: BoomerAMG tuned for 3D (PETSc's defaults coarsen slowly there: ≈ 8× the cost per
@@ -373,18 +404,15 @@ class _ShellP:
         self.solver.precondition_vec(r, z)
 
 
-def check_options(scene, n, *, order=1, mesh=None, solver="auto", products="nodal",
-                  mass="lumped") -> None:
-    """What ``--linalg petsc`` takes: a tensor mesh (uniform or graded), Q1 or Q2, the
-    lumped mass and nodal products, an iterative solver; petsc4py importable."""
+def check_options(scene, n, *, order=1, mesh=None, solver="auto") -> None:
+    """What ``--linalg petsc`` takes: a tensor mesh (uniform or graded), any order, an
+    iterative solver; petsc4py importable."""
     kind, _ = fmesh.parse_option(mesh)
     if kind not in ("uniform", "graded"):
         raise ModelError("--linalg petsc needs a tensor mesh (uniform or graded), not a file")
-    if solver == "fft":
-        raise ModelError("--linalg petsc solves by PCG: --solver fft is the serial direct "
-                         "path (use amg, jacobi or auto)")
-    if mass != "lumped" or products != "nodal":
-        raise ModelError("--linalg petsc takes the lumped mass and nodal products")
+    if solver in fsolve.EXACT:
+        raise ModelError("--linalg petsc solves by PCG: --solver fdm/fft are the serial exact "
+                         "solvers (use amg, jacobi or auto)")
     petsc()
 
 
@@ -393,20 +421,17 @@ class PETScFEMBackend(FEMBackend):
     (module docstring): ``FEMBackend(..., linalg="petsc")`` builds one."""
 
     linalg = "petsc"
-    solver_class = PetscStepSolver
+    solver_factory = staticmethod(petsc_solver)
 
-    def _operators(self, assembly: str):
+    def _space(self):
         ops = TensorOperators(self.mesh, self.order)
         self.part = ops.part
         fsolve._ALLREDUCE = self.part.allreduce if self.part.mpi.Get_size() > 1 else None
         return ops
 
-    def _fft_grid(self):
-        return None  # the direct Fourier path is serial
-
     def _view(self):
-        """The serial operators' description the output functions need (tensor, order)."""
-        return SimpleNamespace(assembly="kron", order=self.order)
+        """The serial space the output functions need (1D data only, matrix-free)."""
+        return self.space.serial
 
     # -- the state: gathered to every rank, so checkpoints have the serial format -----------
     def state(self) -> dict[str, np.ndarray]:
@@ -420,9 +445,9 @@ class PETScFEMBackend(FEMBackend):
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
         phi = np.array(state.get("phi", np.zeros(0)), dtype=float).ravel()
-        if phi.shape != (self.ops.n_dofs,):
+        if phi.shape != (self.space.n_dofs,):
             raise ModelError(f"the state has {phi.size} values of phi; this FEM space "
-                             f"(Q{self.order}, n = {self.n}) has {self.ops.n_dofs}")
+                             f"(order {self.order}, n = {self.n}) has {self.space.n_dofs}")
         local = {k: (self.part.local(np.asarray(v, dtype=float).ravel())
                      if k in ("phi", "mu", "phi_prev", "z_V", "z_A") else v)
                  for k, v in state.items()}
@@ -441,7 +466,7 @@ class PETScFEMBackend(FEMBackend):
     # -- measurements on the gathered field ---------------------------------------------------
     def fields(self) -> dict[str, np.ndarray]:
         return {"phi": self.part.gather(self.phi), "mu": self.part.gather(self.mu),
-                "points": tensor_points(self.ops.locs)}
+                "points": tensor_points(self.space.locs)}
 
     def grid_phi(self) -> np.ndarray:
         return output.uniform_grid_field(self.mesh, self._view(), self.part.gather(self.phi),

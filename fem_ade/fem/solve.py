@@ -1,77 +1,80 @@
-"""The linear solve of one step (SPEC §5), behind a small interface.
+"""The linear solve of one step: one interface, two strategies.
 
-With μ eliminated by the lumped mass M_L (``m`` = M·1: positive for Q1 and for tensor Q2, where
-it is the Gauss–Lobatto/Simpson rule), the step matrix is
+With the GLL mass W diagonal (:mod:`fem_ade.fem.gll`), μ eliminated as μ = W⁻¹Kφ, every
+scheme's step operator is
 
-    S = M_t/Δt − (2κ/ε)K + κε K M_L⁻¹ K,
+    S = a W + c K + κε K W⁻¹ K,      a = 1/Δt + s₀,   c = s₂ − 2κ/ε        (:class:`StepMatrix`)
 
-applied as three sparse products (never formed). M_t is the mass of the time derivative: M_L
-by default, or the consistent M (SPEC §5 literally). With M_t = M_L, S is SPD exactly when
-Δt < ε³/κ, as the spectral symbol; with M_t = M it becomes indefinite well below that (3D Q1,
-n = 16: at 10× the paper's Δt), because M's smallest eigenvalues are M_L's / 27.
+(s₀ = s₂ = 0: the paper's scheme; else the stabilized one), plus, in the stabilized scheme, a
+rank ≤ 3 term Σ σᵢbᵢbᵢᵀ (the penalties' Hessians). S is SPD exactly when Δt < ε³/κ or
+s₂ ≥ 2κ/ε, as the spectral symbol. A solver answers one question (:meth:`solve`): given
+right sides r₁ … r_k (the step's descent direction and the exact constraints' directions),
+return Ŝ⁻¹rⱼ, Ŝ = S + Σσbbᵀ.
 
-S is solved by preconditioned CG with the Bosch–Kay–Stoll–Wathen-type preconditioner
-P = (1/Δt)(M_t + sK) M_L⁻¹ (M_t + sK), s = √(Δtκε), P⁻¹ = Δt (M_t + sK)⁻¹ M_L (M_t + sK)⁻¹,
-where each (M_t + sK)⁻¹ is approximated by
+* :class:`DiagonalizedSolver` (``fdm``; tensor meshes, any order, uniform or graded): **fast
+  diagonalization** (Lynch, Rice & Thomas 1964; Deville, Fischer & Mund §4.3.3). On a tensor
+  mesh W = ⊗ wₐ and K = Σₐ K₁⁽ᵃ⁾ ⊗ (⊗_{b≠a} w_b), so with the 1D generalized eigenbases
+  K₁⁽ᵃ⁾Vₐ = diag(wₐ)VₐΛₐ, VₐᵀWₐVₐ = I, and V = ⊗Vₐ:
 
-- ``amg``: one pyamg smoothed-aggregation V-cycle (iteration count flat in h and Δt);
-- ``chebyshev``: a fixed Chebyshev polynomial of D⁻¹(M_t + sK) (degree 2 while M_t + sK is
-  strongly mass-dominated, as at the paper's Δt, else 4: :data:`CHEBYSHEV_LOW_DEGREE_LIMIT`);
-- ``jacobi``: the same with degree 1 (a scaled diagonal; cheapest, weakest);
-- ``auto``: ``fft`` where it applies, else ``chebyshev`` on meshes of uniform cells while
-  M_t + sK is mass-dominated, else ``amg`` (the measured winners, ``studies/bench.py``: on a
-  graded 64³ mesh Chebyshev needs 23 PCG iterations at the paper's Δt where AMG needs 8);
-- ``fft``: uniform Q1 tensor meshes only: there M, K and M_L are circulant (Kronecker products
-  of 1D circulants), so S is diagonalised by the discrete Fourier transform. The backend then
-  takes the step directly in Fourier space, without PCG (:meth:`fem_ade.fem.step.MixedStep.
-  fourier_step`); :func:`fft_step_inverse` is the same S⁻¹ as a preconditioner.
+      VᵀWV = I,   VᵀKV = Λ = Λ₀ ⊕ Λ₁ ⊕ Λ₂,   VᵀKW⁻¹KV = Λ²,   S⁻¹ = V (a + cΛ + κεΛ²)⁻¹ Vᵀ
 
-pyamg's coarse levels are converted to CSR (it keeps them as BSR with 1×1 blocks, whose
-Gauss–Seidel is its slow generic one), and S is applied with two sparse products when M_t is
-lumped, S x = (m/τ)x + K(c x + κε M_L⁻¹Kx).
+  — exact, with no iteration: d dense 1D transforms forward, a diagonal scaling, d back
+  (BLAS-3 products along the grid lines; the real FFT where the 1D matrices are circulant,
+  p = 1 on a uniform mesh). The rank-one terms enter by Woodbury, all right sides of a step
+  in one batched transform.
+* :class:`KrylovSolver` (``amg``, ``chebyshev``, ``jacobi``; every mesh): preconditioned CG
+  on the matrix-free Ŝ with the Bosch–Kay–Stoll–Wathen-type preconditioner
+  P = (1/τ)(W + sK̃)W⁻¹(W + sK̃), s = √(τκε), τ = 1/a, each (W + sK̃)⁻¹ approximated by one
+  pyamg smoothed-aggregation V-cycle (``amg``), a Chebyshev polynomial (``chebyshev``) or a
+  scaled diagonal (``jacobi``). K̃ is K for p = 1 and for file meshes; for p > 1 on tensor
+  meshes each (W + sK)⁻¹ is :data:`INNER_ITERATIONS` PCG iterations on the high-order
+  W + sK preconditioned by W + sK̃, K̃ the **low-order refined** stiffness — p = 1 on the GLL
+  nodes, spectrally equivalent to K (Orszag 1980; Canuto 1994; MFEM's LOR solvers) and as
+  sparse as a Q1 matrix — and the outer CG is the flexible one, so the iteration counts stay
+  flat in h and p. The stopping test is relative to the size of the step's residual at the
+  previous state (``scales``), so the tolerance follows the change.
 
-The stabilized scheme (SPEC §10) solves with S = (1/Δt + s₀)M_t + (s₂ − 2κ/ε)K + κε K M_L⁻¹ K
-plus a rank ≤ 3 term Σ σᵢbᵢbᵢᵀ (the penalties' Hessians), applied matrix-free inside PCG; the
-preconditioner is the same P for the diagonal part with the effective step τ = 1/(1/Δt + s₀)
-in place of Δt and s from :func:`preconditioner_shift` (√(τκε) in every case measured).
-Measured (discocyte, Q1 32³, amg, 500 steps): 4.2 / 3.6 / 3.4 PCG its per step on average
-(max 6, 6, 5) at 1× / 10× / 100× the paper's Δt; ≈ 0.04 s per step (2 cores, shared).
-
-Interface: ``StepSolver(M_t, K, m, dt=, kappa=, eps=, kind=, rtol=, s0=0, s2=0)`` and
-``solve(b, x0, ref=None, scale=None, low_rank=()) -> (x, its)``; the stopping test is relative
-to the residual of ``ref`` (the previous state), so the tolerance scales with the change per
-step. A PETSc version only has to provide the same two calls.
+``auto`` is ``fdm`` on tensor meshes, else ``chebyshev`` on meshes of near-uniform cells while
+W + sK is mass-dominated, else ``amg``. ``fft`` is ``fdm`` restricted to the meshes where it
+uses the FFT (p = 1, uniform).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import LinearOperator
 
 from ..model import ModelError
 from ..registry import FEM_SOLVERS as SOLVERS
+from .tensor import along
 
-#: ``auto`` takes ``chebyshev`` while s·max(K_ii/m_i) ≤ this (M_L + sK mass-dominated enough
-#: that D⁻¹(M_L + sK) has condition ≤ 1 + 2·this by Gershgorin), else ``amg``
+#: ``auto`` takes ``chebyshev`` (file meshes) while s·max(K_ii/w_i) ≤ this (W + sK mass-
+#: dominated enough that D⁻¹(W + sK) has condition ≤ 1 + 2·this by Gershgorin), else ``amg``
 AUTO_CHEBYSHEV_LIMIT = 20.0
-#: ``chebyshev`` takes degree 2 while s·max(K_ii/m_i) ≤ this (the paper's Δt: measured at 64³,
-#: discocyte, 5 PCG its and 9× the spectral step against 8 its and 19× at degree 4), else 4
+#: ``chebyshev`` takes degree 2 while s·max(K_ii/w_i) ≤ this, else 4
 CHEBYSHEV_LOW_DEGREE_LIMIT = 2.0
-#: PCG stops at rtol·‖b − Sφⁿ‖. Measured (discocyte 32³, 50 steps, against the exact fft
+#: PCG stops at rtol·‖b − Sφⁿ‖. Measured (discocyte 32³, 50 steps, against the exact
 #: solve): |ΔE| = 3e-8 at 1e-6 and 2e-6 at 1e-5, against a discretisation error |ΔE| ≈ 3.
 DEFAULT_RTOL = 1e-6
 #: keyword arguments of pyamg.smoothed_aggregation_solver for the ``amg`` solver
 AMG_OPTIONS: dict = {}
 #: the stabilized scheme's preconditioner shift s is rounded to a power of this, so that the
-#: AMG hierarchy of M_t + sK (≈ 1 s to build at 32³) is reused while the ratcheted (s₀, s₂)
-#: move by small amounts (they do, every few steps, with ΔA drifting): the step operator is
-#: always the exact one, only P is off by ≤ 2.5 % in s (no measurable change in iterations).
-#: A function of (s₀, s₂) alone, so a resumed run rebuilds the same P (bit-identical runs).
+#: AMG hierarchy of W + sK̃ is reused while the ratcheted (s₀, s₂) move by small amounts: the
+#: step operator is always the exact one, only P is off by ≤ 2.5 % in s. A function of
+#: (s₀, s₂) alone, so a resumed run rebuilds the same P (bit-identical runs).
 SHIFT_GRID = 1.05
-
+#: the solvers that solve exactly (no tolerance, no iteration)
+EXACT = ("fdm", "fft")
+#: for p > 1 each (W + sK)⁻¹ of the preconditioner is this many PCG iterations on the
+#: high-order W + sK, preconditioned by the low-order refined one (its V-cycle, Chebyshev
+#: polynomial or diagonal). Measured (discocyte, paper Δt, outer its per step): one V-cycle
+#: on the LOR matrix alone gives 26, 31, 34 at 64³, 96³, 128³ nodes (p = 4) — K̃W⁻¹K̃ is not
+#: spectrally equivalent to KW⁻¹K, though K̃ is to K — while 3 inner iterations give 9, 9
+#: at 64³ and 96³ for p = 4 and 8, in 0.6× the time
+INNER_ITERATIONS = 3
 
 #: the sum of a partial sum over the MPI ranks (None: one process); set by
 #: :mod:`fem_ade.fem.petsc` when the DOFs are distributed, so that every functional and
@@ -88,12 +91,51 @@ def _dot(a, b) -> float:
     return value if _ALLREDUCE is None else _ALLREDUCE(value)
 
 
+def norm(x) -> float:
+    return math.sqrt(_dot(x, x))
+
+
+@dataclass(frozen=True)
+class StepMatrix:
+    """S = a W + c K + κε K W⁻¹ K, the operator of every scheme's step (module docstring)."""
+
+    a: float
+    c: float
+    ke: float
+
+    @classmethod
+    def of(cls, *, dt: float, kappa: float, eps: float, s0: float = 0.0,
+           s2: float = 0.0) -> StepMatrix:
+        return cls(1.0 / dt + s0, s2 - 2.0 * kappa / eps, kappa * eps)
+
+    @property
+    def tau(self) -> float:
+        """The effective time step 1/a."""
+        return 1.0 / self.a
+
+    def symbol(self, lam):
+        """a + cλ + κελ²: S on an eigenvector of W⁻¹K with eigenvalue λ."""
+        return self.a + self.c * lam + self.ke * lam * lam
+
+    def shift(self, stabilized: bool) -> float:
+        """The preconditioner's s (:func:`preconditioner_shift`; on the grid of
+        :data:`SHIFT_GRID` for the stabilized scheme)."""
+        if not stabilized:
+            return math.sqrt(self.tau * self.ke)
+        s_opt = preconditioner_shift(self.tau, self.c, self.ke)
+        return SHIFT_GRID ** round(math.log(s_opt) / math.log(SHIFT_GRID))
+
+
 def pcg(A, b, x0, M, atol, maxiter=500):
-    """Preconditioned CG (the textbook recurrence, as scipy's ``cg``) stopping at ‖r‖ ≤ atol;
-    ``A``, ``M`` are callables. Returns (x, its); on breakdown or maxiter, the last iterate."""
+    """Flexible preconditioned CG stopping at ‖r‖ ≤ atol; ``A``, ``M`` are callables. Returns
+    (x, its); on breakdown or maxiter, the last iterate.
+
+    β is the Polak–Ribière one, rₖ₊₁·(zₖ₊₁ − zₖ)/rₖ·zₖ (Notay 2000): the same iterates as the
+    textbook recurrence for a linear SPD preconditioner, and robust when the preconditioner
+    is a few inner iterations (the high-order ``amg`` path)."""
     x = np.array(x0, dtype=float, copy=True)
     r = b - A(x)
-    if math.sqrt(_dot(r, r)) <= atol:
+    if norm(r) <= atol:
         return x, 0
     z = M(r)
     p = z.copy()
@@ -108,38 +150,24 @@ def pcg(A, b, x0, M, atol, maxiter=500):
         x += alpha * p
         r -= alpha * q
         its += 1
-        if math.sqrt(_dot(r, r)) <= atol:
+        if norm(r) <= atol:
             break
+        z_old = z
         z = M(r)
         rz_new = _dot(r, z)
-        p *= rz_new / rz
+        beta = (rz_new - _dot(r, z_old)) / rz
+        p *= beta
         p += z
         rz = rz_new
     return x, its
-
-
-def amg_vcycle(ml):
-    """One V-cycle from zero, ``ml.aspreconditioner(cycle="V")`` without its two residual
-    norms and the extra fine-level product it spends on them (the same result)."""
-    cycle = getattr(ml, "_MultilevelSolver__solve", None)
-    if cycle is None or len(ml.levels) < 2:
-        return ml.aspreconditioner(cycle="V").matvec
-
-    def apply(b):
-        b = np.asarray(b, dtype=float).ravel()
-        x = np.zeros_like(b)
-        cycle(0, x, b, "V")
-        return x
-
-    return apply
 
 
 def chebyshev_inverse(A: sp.csr_matrix, degree: int, lower_ratio: float = 30.0):
     """A fixed polynomial p(D⁻¹A)D⁻¹ ≈ A⁻¹ (Chebyshev iteration from zero, ``degree`` steps).
 
     The spectrum of D⁻¹A is taken in [λmin, λmax]: λmax from a few power iterations (×1.05),
-    λmin from Gershgorin's discs when they stay positive (for M_L + sK they do: λmin ≥
-    1/(1 + s·max K_ii/m_i)), else λmax/``lower_ratio``. The residual polynomial is a scaled
+    λmin from Gershgorin's discs when they stay positive (for W + sK they do: λmin ≥
+    1/(1 + s·max K_ii/w_i)), else λmax/``lower_ratio``. The residual polynomial is a scaled
     Chebyshev polynomial, so p > 0 on (0, λmax] and the operator is SPD for any SPD A.
     """
     from pyamg.util.linalg import approximate_spectral_radius
@@ -171,97 +199,10 @@ def chebyshev_inverse(A: sp.csr_matrix, degree: int, lower_ratio: float = 30.0):
     return apply
 
 
-class FourierGrid:
-    """A uniform periodic Q1 grid (``shape`` nodes, spacings ``spacing``, DOFs in C order):
-    there M, K and M_L are circulant — Kronecker products of 1D circulants — so the Fourier
-    transform diagonalises them. Their symbols on the rfftn half-spectrum, at θ = 2πj/n:
-    1D mass h(4 + 2cos θ)/6, stiffness (2 − 2cos θ)/h, lumped mass h; in d dimensions
-    M̂ = Π m, K̂ = Σ_a k_a Π_{b≠a} m_b, M̂_L = Π h (a number, ``ml``)."""
-
-    def __init__(self, shape, spacing):
-        from scipy import fft
-
-        from ..backend import fft_workers
-
-        self.fft, self.workers = fft, fft_workers()
-        self.shape, dim = tuple(shape), len(shape)
-        self.axes = tuple(range(dim))
-        ms, ks = [], []
-        for a, (n, h) in enumerate(zip(shape, spacing, strict=True)):
-            theta = 2.0 * np.pi * (fft.rfftfreq(n) if a == dim - 1 else fft.fftfreq(n))
-            view = [1] * dim
-            view[a] = -1
-            ms.append((h * (4.0 + 2.0 * np.cos(theta)) / 6.0).reshape(view))
-            ks.append(((2.0 - 2.0 * np.cos(theta)) / h).reshape(view))
-        self.Mh = ms[0]
-        for m in ms[1:]:
-            self.Mh = self.Mh * m
-        self.Kh = 0.0
-        for a in range(dim):
-            term = ks[a]
-            for b in range(dim):
-                if b != a:
-                    term = term * ms[b]
-            self.Kh = self.Kh + term
-        self.ml = float(np.prod(spacing))
-        self.size = int(np.prod(shape))
-        n_last = shape[-1]
-        w = np.full(n_last // 2 + 1, 2.0)  # Parseval weights of the half-spectrum
-        w[0] = 1.0
-        if n_last % 2 == 0:
-            w[-1] = 1.0
-        self.parseval = w / self.size
-
-    def fwd(self, u):
-        return self.fft.rfftn(np.reshape(u, self.shape), axes=self.axes, workers=self.workers)
-
-    def hermitian(self, uh):
-        """Remove (in place) the part of a half-spectrum that ``irfftn`` cannot see: in the
-        planes k_last = 0 and n/2 a real field has û(−k) = conj(û(k)). Round-off breaks this,
-        and a step whose operator grows some modes (the paper's scheme where
-        κ(εk⁴ − (2/ε)k²) < 0, momentum) grows the broken part unseen until it reaches the field
-        (measured: the discocyte diverged at step 9681 without this). As the spectral
-        reference does (``SpectralBackend._hermitian``)."""
-        axes = tuple(range(len(self.shape) - 1))
-        n = self.shape[-1]
-        for iz in (0, n // 2) if n % 2 == 0 else (0,):
-            plane = uh[..., iz]
-            mirror = np.conj(np.roll(np.flip(plane, axis=axes), 1, axis=axes))
-            uh[..., iz] = 0.5 * (plane + mirror)
-        return uh
-
-    def inv(self, uh):
-        return self.fft.irfftn(uh, s=self.shape, axes=self.axes, workers=self.workers).ravel()
-
-    def dot(self, ah, bh) -> float:
-        """Σ_j a_j b_j of two real fields from their half-spectra (Parseval)."""
-        return float(np.sum(self.parseval * (np.conj(ah) * bh).real))
-
-    def symbol(self, *, mass_factor, c, ke, lumped=True):
-        """(M_L or M)·mass_factor + c K + ke K M_L⁻¹ K: S of the step, diagonal here."""
-        return ((self.ml if lumped else self.Mh) * mass_factor + c * self.Kh
-                + ke * self.Kh * self.Kh / self.ml)
-
-
-def fft_step_inverse(grid, *, dt, kappa, eps, s0=0.0, s2=0.0):
-    """S⁻¹ for uniform periodic Q1: ``grid`` = (n per axis, h per axis, lumped time mass);
-    Ŝ = (1/Δt + s₀)M̂_t + (s₂ − 2κ/ε)K̂ + κε K̂²/M̂_L (:class:`FourierGrid`), positive when
-    Δt < ε³/κ or s₂ ≥ 2κ/ε."""
-    shape, hs, lumped = grid
-    F = FourierGrid(shape, hs)
-    inv = 1.0 / F.symbol(mass_factor=1.0 / dt + s0, c=s2 - 2.0 * kappa / eps,
-                         ke=kappa * eps, lumped=lumped)
-
-    def apply(r):
-        return F.inv(F.fwd(r) * inv)
-
-    return apply
-
-
 def preconditioner_shift(tau, c, ke):
-    """The s of P = (1/τ)(M_t + sK)M_L⁻¹(M_t + sK) for S = M_t/τ + cK + κε K M_L⁻¹K.
+    """The s of P = (1/τ)(W + sK)W⁻¹(W + sK) for S = W/τ + cK + κε K W⁻¹K.
 
-    On an eigenvector of M_L⁻¹K (eigenvalue y) P⁻¹S is (1 + cτy + κετy²)/(1 + sy)². With
+    On an eigenvector of W⁻¹K (eigenvalue y) P⁻¹S is (1 + cτy + κετy²)/(1 + sy)². With
     s = √(κετ) (which matches the y² term; the paper's scheme, c = −2κ/ε < 0) the ratio lies in
     [min(1, (2 + β)/4), max(1, (2 + β)/4)], β = cτ/√(κετ). For the stabilized scheme (c > 0)
     β may exceed 2; then s is raised to the value that minimises the ratio's spread over y
@@ -283,131 +224,234 @@ def preconditioner_shift(tau, c, ke):
     return float(best) * s_star
 
 
-class StepSolver:
-    """Solve S x = b (the Schur complement of SPEC §5) by PCG; assembled once per (Δt, s₀, s₂).
+def woodbury(solve_stack, rhs: list, low_rank) -> list:
+    """Ŝ⁻¹rⱼ for Ŝ = S + Σσᵢbᵢbᵢᵀ from S⁻¹ applied once to the stack [r…, b…]
+    (``solve_stack``: list → list): y − Z G⁻¹Bᵀy, Z = S⁻¹B, G = diag(1/σ) + BᵀZ."""
+    if not low_rank:
+        return solve_stack(rhs)
+    bs = [b for _, b in low_rank]
+    out = solve_stack(list(rhs) + bs)
+    ys, zs = out[: len(rhs)], out[len(rhs):]
+    G = np.array([[_dot(b, z) for z in zs] for b in bs])
+    G += np.diag([1.0 / sig for sig, _ in low_rank])
+    result = []
+    for y in ys:
+        coef = np.linalg.solve(G, [_dot(b, y) for b in bs])
+        for ci, zi in zip(coef, zs, strict=True):
+            y = y - ci * zi
+        result.append(y)
+    return result
 
-    S = (1/Δt + s₀)M_t + (s₂ − 2κ/ε)K + κε K M_L⁻¹ K: s₀ = s₂ = 0 is the paper's scheme, else
-    the stabilized one (its diagonal part; the low-rank terms are given to :meth:`solve`).
+
+# ---------------------------------------------------------------------------------------------
+# fast diagonalization (tensor meshes)
+# ---------------------------------------------------------------------------------------------
+class Eigenbasis:
+    """The eigenbasis V of W⁻¹K on a tensor space (module docstring): ``lam`` (Λ on the
+    transformed grid), ``forward`` (Vᵀ, on a stack of functionals), ``backward`` (V).
+
+    When the 1D matrices are circulant (p = 1, uniform mesh) V can be the real Fourier
+    transform (then Vᵀ is rfftn and V irfftn up to the scale ``scale`` = W, a number;
+    ``fourier`` None: wherever it can); otherwise V is built from the dense 1D generalized
+    eigenproblems K₁v = λ diag(w) v (``scipy.linalg.eigh``), once per mesh.
     """
 
-    def __init__(self, M, K, m, *, dt, kappa, eps, kind="amg", rtol=None, degree=None,
-                 grid=None, s0=0.0, s2=0.0, cache=None, lumped=False):
-        if kind not in SOLVERS:
-            raise ModelError(f"unknown FEM solver {kind!r}; valid: {', '.join(SOLVERS)}")
-        self.tau = dt if s0 == 0.0 else 1.0 / (1.0 / dt + s0)  # the effective time step
-        self.c = s2 - 2.0 * kappa / eps
-        stabilized = s0 != 0.0 or s2 != 0.0
-        if stabilized:  # s on a grid of ratio SHIFT_GRID: P depends on (s₀, s₂) by steps
-            s_opt = preconditioner_shift(self.tau, self.c, kappa * eps)
-            self.s = SHIFT_GRID ** round(math.log(s_opt) / math.log(SHIFT_GRID))
+    def __init__(self, space, fourier: bool | None = None):
+        self.shape = tuple(space.shape)
+        self.dim = len(self.shape)
+        self.fourier = space.circulant if fourier is None else fourier
+        if self.fourier and not space.circulant:
+            raise ModelError("the FFT diagonalizes circulant 1D operators only (order 1 on a "
+                             "uniform mesh)")
+        if self.fourier:
+            from scipy import fft
+
+            from ..backend import fft_workers
+
+            self.fft, self.workers = fft, fft_workers()
+            lams = []
+            for a, ax in enumerate(space.axes):
+                n, h = ax.size, float(ax.gaps[0])
+                theta = 2.0 * np.pi * (fft.rfftfreq(n) if a == self.dim - 1 else fft.fftfreq(n))
+                lams.append((2.0 - 2.0 * np.cos(theta)) / h**2)
+            self.scale = float(space.weights[0])
         else:
-            self.s = math.sqrt(dt * kappa * eps)
-        # how far M_t + sK is from its mass: s·max(K_ii/m_i) (Gershgorin: cond(D⁻¹B) ≤ 1 + 2x)
-        stiffness = self.s * float(np.max(K.diagonal() / np.asarray(M.diagonal()).ravel()))
-        if kind == "auto":  # Chebyshev only on a uniform mesh of vertices: graded, file and
-            # Q2 meshes (lumped weights varying by more than 1.5) need AMG's flat counts
-            uniform = float(np.max(m) / np.min(m)) <= 1.5
-            kind = ("fft" if grid is not None else "chebyshev"
-                    if uniform and stiffness <= AUTO_CHEBYSHEV_LIMIT else "amg")
+            import scipy.linalg as sl
+
+            lams, self.V, self.VT = [], [], []
+            for ax in space.axes:
+                lam, vec = sl.eigh(ax.stiffness.toarray(), np.diag(ax.weights))
+                lams.append(np.maximum(lam, 0.0))  # the constants: 0 (to round-off)
+                self.V.append(np.ascontiguousarray(vec))
+                self.VT.append(np.ascontiguousarray(vec.T))
+            self.scale = 1.0
+        lam = 0.0
+        for a, la in enumerate(lams):
+            view = [1] * self.dim
+            view[a] = -1
+            lam = lam + la.reshape(view)
+        self.lam = lam
+
+    def inverse(self, S: StepMatrix) -> np.ndarray:
+        """1/(Ŝ·scale) on the transformed grid."""
+        return 1.0 / (S.symbol(self.lam) * self.scale)
+
+    def apply(self, stack: np.ndarray, inv_symbol: np.ndarray) -> np.ndarray:
+        """V diag(inv_symbol) Vᵀ on a stack (k, N) of vectors, one batched transform."""
+        k = stack.shape[0]
+        X = stack.reshape((k,) + self.shape)
+        axes = tuple(range(1, self.dim + 1))
+        if self.fourier:
+            Xh = self.fft.rfftn(X, axes=axes, workers=self.workers)
+            Xh *= inv_symbol
+            return self.fft.irfftn(Xh, s=self.shape, axes=axes,
+                                   workers=self.workers).reshape(k, -1)
+        for a in range(self.dim):
+            X = along(self.VT[a], X, a + 1)
+        X = X * inv_symbol
+        for a in range(self.dim):
+            X = along(self.V[a], X, a + 1)
+        return X.reshape(k, -1)
+
+
+class DiagonalizedSolver:
+    """Ŝ⁻¹ exactly by fast diagonalization (module docstring): no iteration, ``its`` = 0."""
+
+    levels = 0
+    rtol = None
+
+    def __init__(self, basis: Eigenbasis, S: StepMatrix):
+        self.basis, self.S = basis, S
+        self.kind = "fft" if basis.fourier else "fdm"
+        self.inv_symbol = basis.inverse(S)
+
+    def _solve_stack(self, vectors: list) -> list:
+        out = self.basis.apply(np.stack(vectors), self.inv_symbol)
+        return list(out)
+
+    def solve(self, rhs: list, x0=None, scales=None, low_rank=()):
+        """([Ŝ⁻¹r for r in rhs], 0)."""
+        return woodbury(self._solve_stack, rhs, low_rank), 0
+
+
+# ---------------------------------------------------------------------------------------------
+# preconditioned CG (every mesh)
+# ---------------------------------------------------------------------------------------------
+def amg_vcycle(B: sp.csr_matrix):
+    """One pyamg smoothed-aggregation V-cycle for B (public API: ``aspreconditioner``)."""
+    import pyamg
+
+    ml = pyamg.smoothed_aggregation_solver(B, symmetry="hermitian", max_coarse=500,
+                                           **AMG_OPTIONS)
+    for level in ml.levels:  # pyamg keeps coarse levels as BSR with 1×1 blocks, whose
+        level.A = level.A.tocsr()  # Gauss–Seidel is the slow generic one
+        for name in ("P", "R"):
+            if hasattr(level, name):
+                setattr(level, name, getattr(level, name).tocsr())
+    return len(ml.levels), ml.aspreconditioner(cycle="V").matvec
+
+
+class KrylovSolver:
+    """Ŝ⁻¹ by PCG (module docstring). ``space`` gives W (``weights``), K (``K @ x``) and K̃
+    (``preconditioner_stiffness()``); ``cache`` shares the preconditioners of W + sK̃ by
+    (kind, s) across the solvers of one run (the stabilized scheme's ratchet)."""
+
+    def __init__(self, space, S: StepMatrix, *, kind: str = "amg", rtol: float | None = None,
+                 stabilized: bool = False, cache: dict | None = None, degree=None):
+        self.space, self.S = space, S
+        self.m = space.weights
+        self.minv = 1.0 / self.m
+        self.K = space.K
+        self.rtol = DEFAULT_RTOL if rtol is None else float(rtol)
+        self.s = S.shift(stabilized)
+        Kt = space.preconditioner_stiffness()
+        stiffness = self.s * float(np.max(Kt.diagonal() / self.m))
+        if kind == "auto":
+            uniform = float(np.max(self.m) / np.min(self.m)) <= 1.5
+            kind = "chebyshev" if uniform and stiffness <= AUTO_CHEBYSHEV_LIMIT else "amg"
         if degree is None:
             degree = 2 if stiffness <= CHEBYSHEV_LOW_DEGREE_LIMIT else 4
-        self.degree = 1 if kind == "jacobi" else degree
         self.kind = kind
-        self.rtol = DEFAULT_RTOL if rtol is None else float(rtol)
-        self.K = K
-        self.minv = 1.0 / m
-        self.m = m
-        self.ke = kappa * eps
-        # with M_t = M_L (diagonal), S x = (m/τ)x + K(c x + κε M_L⁻¹ K x): two sparse products
-        self.lumped = lumped
-        self.A0 = None if lumped else (M / self.tau + self.c * K).tocsr()
-        n = M.shape[0]
-        self.n = n
-        self.dt = dt
-        B = (M + self.s * K).tocsr()
+        self.degree = 1 if kind == "jacobi" else degree
+        key = (kind, self.s)
         # pyamg and the Chebyshev bounds draw random start vectors: seed them (and leave the
         # caller's random state alone), so that a rebuilt solver is bit for bit the same one
-        # (a resumed run repeats the uninterrupted one exactly)
         rng_state = np.random.get_state()
         np.random.seed(12345)
-        key = (kind, self.s)
         try:
-            if kind == "fft":
-                if grid is None:
-                    raise ModelError("solver 'fft' needs a uniform tensor mesh with Q1 elements")
-                self.levels = 0
-                self.B_inv = None
-                self.fft_inverse = fft_step_inverse(grid, dt=dt, kappa=kappa, eps=eps,
-                                                    s0=s0, s2=s2)
-            elif cache is not None and key in cache:
+            if cache is not None and key in cache:
                 self.levels, self.B_inv = cache[key]
-            elif kind == "amg":
-                import pyamg
-
-                ml = pyamg.smoothed_aggregation_solver(B, symmetry="hermitian", max_coarse=500,
-                                                       **AMG_OPTIONS)
-                for level in ml.levels:  # pyamg keeps coarse levels as BSR with 1×1 blocks,
-                    level.A = level.A.tocsr()  # whose Gauss–Seidel is the slow generic one
-                    for name in ("P", "R"):
-                        if hasattr(level, name):
-                            setattr(level, name, getattr(level, name).tocsr())
-                self.levels = len(ml.levels)
-                self.B_inv = amg_vcycle(ml)
             else:
-                self.levels = 1
-                self.B_inv = chebyshev_inverse(B, self.degree)
-            if cache is not None and kind != "fft" and key not in cache:
-                if len(cache) >= 4:
-                    cache.pop(next(iter(cache)))
-                cache[key] = (self.levels, self.B_inv)
+                B = (sp.diags(self.m) + self.s * Kt).tocsr()
+                if kind == "amg":
+                    self.levels, self.B_inv = amg_vcycle(B)
+                else:
+                    self.levels, self.B_inv = 1, chebyshev_inverse(B, self.degree)
+                if cache is not None:
+                    if len(cache) >= 4:
+                        cache.pop(next(iter(cache)))
+                    cache[key] = (self.levels, self.B_inv)
         finally:
             np.random.set_state(rng_state)
-        self.S = LinearOperator((n, n), matvec=self.apply, dtype=float)
-        self.P = LinearOperator((n, n), matvec=self.precondition, dtype=float)
+        self.inner = INNER_ITERATIONS if getattr(space, "order", 1) > 1 and \
+            getattr(space, "axes", None) is not None else 1
+        if self.inner > 1:  # LOR: a few PCG iterations on the high-order W + sK
+            lor_inv = self.B_inv
 
-    def apply(self, x):
-        """S x = (M_t/τ + cK) x + κε K (M_L⁻¹ K x)."""
-        x = np.asarray(x).ravel()
-        Kx = self.K @ x
-        if self.lumped:
-            return (self.m / self.tau) * x + self.K @ (self.c * x + self.ke * (self.minv * Kx))
-        return self.A0 @ x + self.ke * (self.K @ (self.minv * Kx))
+            def high_order(v):
+                return self.m * v + self.s * (self.K @ v)
+
+            def inner(r):
+                return pcg(high_order, r, np.zeros_like(r), lor_inv, 0.0,
+                           maxiter=self.inner)[0]
+
+            self.B_inv = inner
+
+    def apply(self, x, low_rank=()):
+        """Ŝx = a W x + K(c x + κε W⁻¹K x) + Σσb(b·x)."""
+        S = self.S
+        y = (S.a * self.m) * x + self.K @ (S.c * x + S.ke * (self.minv * (self.K @ x)))
+        for sig, b in low_rank:
+            y += (sig * _dot(b, x)) * b
+        return y
 
     def precondition(self, r):
-        """P⁻¹ r = τ (M_t + sK)⁻¹ M_L (M_t + sK)⁻¹ r (inverses approximate), or S⁻¹ r (fft)."""
-        if self.kind == "fft":
-            return self.fft_inverse(np.asarray(r).ravel())
+        """P⁻¹r = τ (W + sK̃)⁻¹ W (W + sK̃)⁻¹ r (inverses approximate)."""
         y = self.B_inv(np.asarray(r).ravel())
-        return self.tau * self.B_inv(self.m * y)
+        return self.S.tau * self.B_inv(self.m * y)
 
-    def operator(self, low_rank=()):
-        """S + Σ σᵢ bᵢbᵢᵀ as a LinearOperator (``low_rank``: pairs (σ, b)), matrix-free."""
-        if not low_rank:
-            return self.S
-        def matvec(x):  # no dense BLAS products (see _dot)
-            x = np.asarray(x).ravel()
-            y = self.apply(x)
-            for sig, b in low_rank:
-                y += (sig * _dot(b, x)) * b
-            return y
+    def solve(self, rhs: list, x0=None, scales=None, low_rank=()):
+        """([x with ‖r − Ŝx‖ ≤ rtol·scale], total PCG iterations). ``x0``: warm starts;
+        ``scales``: ‖r − Ŝ·(previous state)‖ per right side (default ‖r‖)."""
+        xs, total = [], 0
+        for j, r in enumerate(rhs):
+            start = np.zeros_like(r) if x0 is None or x0[j] is None else x0[j]
+            scale = norm(r) if scales is None or scales[j] is None else scales[j]
+            if scale == 0.0:
+                xs.append(np.zeros_like(r))
+                continue
+            # not converged or broken down (NaN input): return what there is; the loop's
+            # guards judge the state (max |φ|, finiteness), the history shows the its.
+            x, its = pcg(lambda v: self.apply(v, low_rank), np.asarray(r, dtype=float), start,
+                         self.precondition, self.rtol * scale, maxiter=500)
+            xs.append(x)
+            total += its
+        return xs, total
 
-        return LinearOperator((self.n, self.n), matvec=matvec, dtype=float)
 
-    def solve(self, b, x0, ref=None, scale=None, low_rank=()):
-        """Return (x, its): ‖b − Ŝx‖ ≤ rtol·‖b − Ŝ·ref‖ (ref defaults to x0), Ŝ = S + Σσbbᵀ.
-
-        ``scale`` = ‖b − Ŝ·ref‖ may be given by a caller who has it cheaper. PCG keeps the
-        preconditioner of the diagonal part S: a rank-k perturbation costs at most k extra
-        iterations in exact arithmetic.
-        """
-        op = self.operator(low_rank)
-        ref = x0 if ref is None else ref
-        if scale is None:
-            r = b - op.matvec(ref)
-            scale = math.sqrt(_dot(r, r))
-        if scale == 0.0:
-            return np.array(ref, copy=True), 0
-        # not converged or broken down (NaN input): return what there is; the loop's
-        # guards judge the state (max |φ|, finiteness), the history shows the its.
-        return pcg(op.matvec, np.asarray(b, dtype=float), x0, self.precondition,
-                   self.rtol * scale, maxiter=500)
+def make_solver(kind: str, space, S: StepMatrix, *, rtol=None, stabilized=False, cache=None,
+                eigenbasis=None):
+    """The solver ``kind`` (:data:`fem_ade.registry.FEM_SOLVERS`) of S on ``space``;
+    ``eigenbasis``: the space's :class:`Eigenbasis` (built once per run by the caller)."""
+    if kind not in SOLVERS:
+        raise ModelError(f"unknown FEM solver {kind!r}; valid: {', '.join(SOLVERS)}")
+    if kind == "auto":
+        kind = "fdm" if eigenbasis is not None else "auto"
+    if kind in EXACT:
+        if eigenbasis is None:
+            raise ModelError(f"solver {kind!r} needs a tensor mesh (uniform or graded)")
+        if kind == "fft" and not eigenbasis.fourier:
+            raise ModelError("solver 'fft' needs equally spaced nodes (order 1 on a uniform "
+                             "mesh); 'fdm' solves every tensor mesh exactly")
+        return DiagonalizedSolver(eigenbasis, S)
+    return KrylovSolver(space, S, kind=kind, rtol=rtol, stabilized=stabilized, cache=cache)
