@@ -127,6 +127,8 @@ class RunResult:
     final_grid: object = None
     #: the loop's CPU time (all the process' threads), beside ``wall_s``
     cpu_s: float = 0.0
+    #: the backend's set-up CPU time (set by fem_ade.runs)
+    setup_cpu_s: float = 0.0
 
     @property
     def exit_code(self) -> int:

@@ -433,6 +433,7 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool, be: B
         if shapes is not None:
             shapes.close()
     result.shapes = shapes.rows if shapes is not None else []
+    result.setup_cpu_s = getattr(be, "setup_cpu_s", 0.0) if start is None else 0.0
     result.shape, grid = describe_final(be, result.final)
     result.final_grid = grid[0]
     if out is not None:

@@ -1,120 +1,171 @@
-"""Convergence in space and in time, for transients and for steady shapes (issue 13).
+"""Convergence in space and in time: the spectral-element FEM of every order against the
+spectral reference, from the paper's initial condition and from a resolved start (issue 21).
 
-* ``spatial``: for ``discocyte`` (ε = 0.04), ``torus`` (ε = 0.03) and ``three-arm``
-  (ε = 0.02), every discretisation runs the paper's scheme at the paper's Δt for ``STEPS``
-  steps from the same initial condition; the errors in E, W, G, V, A, ΔA and the L² error
-  of φ (on the discretisation's own uniform grid, the reference resampled spectrally) are
-  measured against a fine spectral reference at the same Δt — pure spatial error (SPEC §5).
-  Rates are fitted over the levels whose node spacing is at most ε (coarser levels are
-  pre-asymptotic: shown, not fitted). Discretisations: spectral, FEM Q1 on uniform meshes
-  (its exact Fourier path), FEM Q1 on graded meshes (AMG), FEM Q2 (AMG).
-* ``q2``: why the 3D Q2 error stalled (4.5e-4 at n = 24 and 32 in the first cost study):
-  Q2 at the same levels with the products at quadrature points, and with the consistent
-  mass, against the default (nodal products, lumped mass).
+* ``spatial``: for ``discocyte`` (ε = 0.04) and ``three-arm`` (ε = 0.02), every
+  discretisation runs the paper's scheme at the paper's Δt for ``steps`` steps, at the same
+  Δt as a fine spectral reference — the difference is pure spatial error — from two starts:
+
+  - ``paper``: the paper's initial ellipsoid, whose interface is about 2.2× thinner than the
+    equilibrium profile (E falls from 312 to 40 in the discocyte's 50 steps): a hard
+    transient, whose error depends on where the nodes fall in the layer;
+  - ``resolved``: the reference's own state after ``start`` steps of the paper's recipe (a
+    run folder, moved onto each discretisation's nodes by its Fourier series: the same
+    smooth field to round-off), then ``steps`` steps more.
+
+  Discretisations: spectral; the FEM of order p = 1, 2, 3, 4, 6, 8 on uniform meshes (exact
+  fast-diagonalization solves), p = 1 and 4 on graded meshes. Levels are nodes per axis
+  (n = nodes / p cells). Errors in E, W, G, V, A, ΔA (relative, signed in the JSON) and the
+  relative L² error of φ on the discretisation's uniform grid (the reference resampled
+  spectrally); rates fitted over the levels whose node spacing is at most ε.
 * ``steady``: ``discocyte`` to its steady state (exact constraints, stabilized scheme at
-  100× Δt, momentum, until 1e-10) at every level of spectral and FEM Q1; errors in E, V, A
-  and the shape descriptors against the finest spectral steady state.
-* ``temporal``: the order in Δt of the paper's scheme and of the stabilized one, at a fixed
-  time against the paper's scheme at Δt₀/8 on the same grid; and the stabilized scheme's
-  slowdown: the time it takes to reach the energy the paper's scheme has at t = T.
+  100× Δt, momentum, until 1e-10) at several levels of spectral, p = 1 and p = 4; errors
+  against the finest spectral steady state.
+* ``temporal``: the order in Δt of the paper's scheme and of the stabilized one (spectral),
+  and the stabilized scheme's slowdown.
 
-Writes ``convergence.json`` (every run, with its wall time: ``studies/cost.py`` reads it),
-``convergence.md`` and ``convergence-*.png`` into ``--out`` (default ``studies/results``).
-The full run takes hours on 2 cores; ``--quick`` (the test suite) seconds.
+Every run goes through :func:`fem_ade.runs.simulate` — the command line's API — and its row
+carries the exact ``python -m fem_ade.run ...`` line that repeats it, its CPU seconds (set-up
+and loop) and wall time. Times are one thread: this script sets ``OPENBLAS_NUM_THREADS=1`` and
+``FEM_ADE_FFT_WORKERS=1`` unless they are set. ``studies/cost.py`` reads the rows.
 
-    python studies/convergence.py [--parts spatial q2 steady temporal]
+Writes ``convergence.json``, ``convergence.md`` and ``convergence-*.png`` into ``--out``
+(default ``studies/results``), the start folders under ``--runs`` (default
+``runs/convergence``). The full run takes about an hour on 2 cores; ``--quick`` (the test
+suite) seconds.
+
+    python studies/convergence.py [--parts spatial steady temporal] [--scenes discocyte]
     python studies/convergence.py --quick --out /tmp/c
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
-import time
-from pathlib import Path
 
-import numpy as np
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # one thread: CPU seconds compare
+os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results"
 QUANTITIES = ("E", "W", "G", "V", "A", "dA")
 
+#: discretisation -> (backend, options)
+METHODS = {
+    "spectral": ("spectral", {}),
+    **{f"p{p}": ("fem", {"order": p}) for p in (1, 2, 3, 4, 6, 8)},
+    "p1 graded": ("fem", {"order": 1, "mesh": "graded"}),
+    "p4 graded": ("fem", {"order": 4, "mesh": "graded"}),
+    "p4 amg": ("fem", {"order": 4, "solver": "amg"}),
+}
+#: the largest node count per axis a discretisation runs at (the iterative path: its cost
+#: is shown, its error is p4's)
+MAX_NODES = {"p4 amg": 64}
+#: one colour per discretisation in every plot
+COLOURS = {"spectral": "#d62728", "p1": "#1f77b4", "p2": "#17becf", "p3": "#9467bd",
+           "p4": "#2ca02c", "p6": "#8c564b", "p8": "#e377c2", "p1 graded": "#aec7e8",
+           "p4 graded": "#98df8a", "p4 amg": "#bcbd22"}
+
 FULL = {
-    "steps": 50,
     "scenes": {
-        "discocyte": {"ref": 128, "spectral": (24, 32, 48, 64, 96), "Q1": (24, 32, 48, 64, 96),
-                      "Q1 graded": (32, 48, 64, 96), "Q2": (12, 16, 24, 32)},
-        "torus": {"ref": 128, "spectral": (32, 48, 64, 96), "Q1": (32, 48, 64, 96),
-                  "Q1 graded": (48, 64), "Q2": (16, 24, 32)},
-        "three-arm": {"ref": 160, "spectral": (48, 64, 96, 128), "Q1": (48, 64, 96, 128),
-                      "Q2": (24, 32, 40)},
+        "discocyte": {"ref": 128, "start": 50, "steps": 50,
+                      "nodes": (24, 32, 40, 48, 64, 72, 80, 96)},
+        "three-arm": {"ref": 192, "start": 50, "steps": 50,
+                      "nodes": (48, 64, 72, 80, 96, 128)},
     },
-    "q2": {"scene": "discocyte", "ns": (12, 16, 24, 32)},
-    "steady": {"scene": "discocyte", "ref": 96, "spectral": (32, 48, 64), "Q1": (32, 48, 64, 96)},
+    "methods": tuple(METHODS),
+    "steady": {"scene": "discocyte", "ref": 96, "levels": {"spectral": (32, 48, 64),
+                                                           "p1": (32, 48, 64, 96),
+                                                           "p4": (24, 32, 48, 64)}},
     "temporal": {"scene": "discocyte", "n": 32, "steps": 64, "factors": (8, 4, 2, 1),
                  "stabilized": (1, 4, 16, 64, 100)},
 }
 #: the quick mode runs the 2D teaching ellipse (seconds): the same code paths, 2D grids
 QUICK = {
-    "steps": 20,
-    "scenes": {"ellipse-2d": {"ref": 128, "spectral": (32, 48), "Q1": (32, 48, 64),
-                              "Q1 graded": (32, 48), "Q2": (16, 24, 32)}},
-    "q2": {"scene": "ellipse-2d", "ns": (16, 24)},
-    "steady": {"scene": "ellipse-2d", "ref": 96, "spectral": (32, 48), "Q1": (32, 48, 64)},
+    "scenes": {"ellipse-2d": {"ref": 192, "start": 20, "steps": 20,
+                              "nodes": (32, 48, 64, 96)}},
+    "methods": ("spectral", "p1", "p2", "p4", "p4 graded", "p4 amg"),
+    "steady": {"scene": "ellipse-2d", "ref": 96, "levels": {"spectral": (32, 48),
+                                                            "p1": (32, 48, 64),
+                                                            "p4": (32, 48)}},
     "temporal": {"scene": "ellipse-2d", "n": 32, "steps": 16, "factors": (8, 4, 2, 1),
                  "stabilized": (1, 10)},
 }
 
-#: one colour per discretisation in every plot
-COLOURS = {"spectral": "#d62728", "Q1": "#1f77b4", "Q1 graded": "#ff7f0e", "Q2": "#2ca02c",
-           "Q2 quadrature": "#9467bd", "Q2 consistent": "#8c564b"}
-#: discretisation label -> (backend, backend options, nodes per cell)
-DISCRETISATIONS = {
-    "spectral": ("spectral", {}, 1),
-    "Q1": ("fem", {"solver": "fft"}, 1),
-    "Q1 graded": ("fem", {"mesh": "graded", "solver": "amg"}, 1),
-    "Q2": ("fem", {"order": 2, "solver": "amg"}, 2),
-    "Q2 quadrature": ("fem", {"order": 2, "solver": "amg", "products": "quadrature"}, 2),
-    "Q2 consistent": ("fem", {"order": 2, "solver": "amg", "mass": "consistent"}, 2),
-}
+
+def order_of(label: str) -> int:
+    return METHODS[label][1].get("order", 1)
+
+
+def levels(label: str, nodes) -> list[int]:
+    """The cell counts n of a discretisation: the node counts divisible by its order, ≥ 3
+    cells."""
+    p = order_of(label)
+    top = MAX_NODES.get(label, max(nodes))
+    return [N // p for N in nodes if N % p == 0 and N // p >= 3 and N <= top]
+
+
+def command(scene: str, label: str, n: int, steps: int, phi0: str | None = None,
+            extra: tuple = ()) -> str:
+    """The command line that repeats a run."""
+    backend, options = METHODS[label]
+    parts = ["python -m fem_ade.run", scene, "--backend", backend]
+    for key, value in options.items():
+        parts += [f"--{key}", str(value)]
+    parts += ["--n", str(n), "--steps", str(steps), "--every", str(steps)]
+    if phi0:
+        parts += ["--phi0", phi0]
+    parts += [*extra, "--allow-underresolved", "--no-render", "--quiet"]
+    return " ".join(parts)
 
 
 def resample(phi: np.ndarray, m: int) -> np.ndarray:
-    """A smooth periodic grid field (n,)*d on (m,)*d points by Fourier interpolation."""
-    n, d = phi.shape[0], phi.ndim
-    if m == n:
+    """A periodic grid field (n,)*d onto (m,)*d points by its Fourier series."""
+    from fem_ade.initial import resample_fourier
+
+    if phi.shape[0] == m:
         return phi
-    F = np.fft.fftn(phi)
-    G = np.zeros((m,) * d, dtype=complex)
-    k = min(n, m) // 2  # the modes |j| < min(n, m)/2 (negative ones counted from the end)
-    idx = np.ix_(*[np.r_[0:k, -k + 1:0]] * d)
-    G[idx] = F[idx]
-    return np.real(np.fft.ifftn(G)) * (m / n) ** d
+    x = np.arange(m) / m
+    return resample_fourier(phi, 1.0, [x] * phi.ndim)
 
 
-def run(scene, label: str, n: int, steps: int, *, scheme="paper", dt=None, **extra) -> dict:
-    """One run: its final diagnostics, φ on its uniform grid, wall time (set-up included)."""
-    from fem_ade.backend import make_backend
-    from fem_ade.loop import run_loop
-
-    backend, options, _ = DISCRETISATIONS[label]
-    dt = scene.dt if dt is None else dt
-    t0, c0 = time.perf_counter(), time.process_time()
-    be = make_backend(backend, scene, n=n, scheme=scheme, **{**options, **extra})
-    setup = time.perf_counter() - t0
-    r = run_loop(be, dt=dt, steps=steps, every=steps)
-    return {"label": label, "n": n, "wall_s": time.perf_counter() - t0, "setup_s": setup,
-            "cpu_s": time.process_time() - c0, "scheme": scheme, "dt": dt, "steps": steps,
-            "options": {**options, **extra},
-            "final": {q: float(r.final[q]) for q in QUANTITIES}, "grid": np.array(be.grid_phi())}
+#: each run is repeated this many times and its least CPU time kept (set by main)
+REPEATS = 1
 
 
-def errors(row: dict, ref: dict, L: float) -> dict:
-    """Relative errors of the diagnostics and the relative L² error of φ."""
+def run(scene, label: str, n: int, steps: int, *, phi0: str | None = None, out=None) -> dict:
+    """One run through the command line's API: final diagnostics, φ on its uniform grid,
+    CPU (set-up + loop; the least of :data:`REPEATS` runs) and wall seconds."""
+    from fem_ade.runs import simulate
+
+    backend, options = METHODS[label]
+    t0 = time.perf_counter()
+    cpu = []
+    for _ in range(REPEATS if out is None else 1):
+        r = simulate(scene, backend=backend, n=n, steps=steps, every=steps, phi0=phi0,
+                     backend_options=dict(options), allow_underresolved=True, render=False,
+                     out=out, force=out is not None)
+        cpu.append(r.cpu_s + r.setup_cpu_s)
+    p = order_of(label)
+    return {"label": label, "method": backend, "order": p if backend == "fem" else None,
+            "mesh": options.get("mesh", "uniform"), "n": n,
+            "nodes": n * (p if backend == "fem" else 1),
+            "cpu_s": min(cpu), "loop_cpu_s": r.cpu_s, "wall_s":
+            (time.perf_counter() - t0) / len(cpu), "steps": steps, "status": r.status,
+            "final": {q: float(r.final[q]) for q in QUANTITIES},
+            "grid": np.asarray(r.final_grid)}
+
+
+def errors(row: dict, ref: dict) -> dict:
+    """Signed relative errors of the diagnostics and the relative L² error of φ."""
     out = {}
     for q in QUANTITIES:
         scale = abs(ref["final"][q]) or 1.0
-        out[q] = abs(row["final"][q] - ref["final"][q]) / scale
+        out[q] = (row["final"][q] - ref["final"][q]) / scale
     g = row["grid"]
     r = resample(ref["grid"], g.shape[0])
     out["phi_L2"] = float(np.linalg.norm(g - r) / np.linalg.norm(r))
@@ -122,63 +173,55 @@ def errors(row: dict, ref: dict, L: float) -> dict:
 
 
 def fit(hs, errs, eps) -> float | None:
-    """The slope of log(error) against log(h) over the levels with h ≤ ε (≥ 2 of them)."""
-    pts = [(h, e) for h, e in zip(hs, errs, strict=True) if h <= eps * (1 + 1e-9) and e > 0]
+    """The slope of log|error| against log(h) over the levels with h ≤ ε (≥ 2 of them)."""
+    pts = [(h, abs(e)) for h, e in zip(hs, errs, strict=True)
+           if h <= eps * (1 + 1e-9) and e != 0]
     if len(pts) < 2:
         return None
     h, e = np.array(pts).T
     return float(np.polyfit(np.log(h), np.log(e), 1)[0])
 
 
-def spatial(plan: dict, quick: bool) -> dict:
+def spatial(plan: dict, runs: Path) -> dict:
     from fem_ade.scenes import get_scene
 
     out = {}
-    for name, levels in plan["scenes"].items():
+    for name, cfg in plan["scenes"].items():
         scene = get_scene(name)
         p = scene.params
-        ref = run(scene, "spectral", levels["ref"], plan["steps"])
-        rows = []
-        for label, ns in levels.items():
-            if label == "ref":
-                continue
-            for n in ns:
-                row = run(scene, label, n, plan["steps"])
-                h = p.L / (n * DISCRETISATIONS[label][2])
-                row.update(h=h, errors=errors(row, ref, p.L))
-                rows.append(row)
-                print(f"  {name:10s} {label:10s} n={n:4d} h/eps={h / p.eps:5.2f} "
-                      f"{row['wall_s']:7.1f} s  " + "  ".join(
-                          f"{q} {row['errors'][q]:.2e}" for q in ("E", "V", "A", "phi_L2")),
-                      flush=True)
-        rates = {}
-        for label in {r["label"] for r in rows}:
-            sel = [r for r in rows if r["label"] == label]
-            rates[label] = {q: fit([r["h"] for r in sel], [r["errors"][q] for r in sel], p.eps)
-                            for q in (*QUANTITIES, "phi_L2")}
-        out[name] = {"eps": p.eps, "steps": plan["steps"], "ref_n": levels["ref"],
-                     "ref": ref["final"], "rows": rows, "rates": rates}
+        start_dir = runs / f"{name}-start-{cfg['start']}"
+        # the resolved start: the reference's state after cfg["start"] steps (a run folder)
+        run(scene, "spectral", cfg["ref"], cfg["start"], out=start_dir)
+        start_cmd = (command(name, "spectral", cfg["ref"], cfg["start"]).replace(
+            " --allow-underresolved", "") + f" --out {start_dir}")
+        out[name] = {"eps": p.eps, "steps": cfg["steps"], "ref_n": cfg["ref"],
+                     "start_steps": cfg["start"], "start_command": start_cmd, "starts": {}}
+        for start, phi0 in (("paper", None), ("resolved", str(start_dir))):
+            ref = run(scene, "spectral", cfg["ref"], cfg["steps"], phi0=phi0)
+            rows = []
+            for label in plan["methods"]:
+                for n in levels(label, cfg["nodes"]):
+                    if label == "spectral" and n >= cfg["ref"]:
+                        continue
+                    row = run(scene, label, n, cfg["steps"], phi0=phi0)
+                    row["h"] = p.L / row["nodes"]
+                    row["errors"] = errors(row, ref)
+                    row["command"] = command(name, label, n, cfg["steps"], phi0)
+                    rows.append(row)
+                    e = row["errors"]
+                    print(f"  {name:10s} {start:8s} {label:9s} n={n:3d} nodes={row['nodes']:3d}"
+                          f" cpu {row['cpu_s']:6.2f} s  E {e['E']:+.2e} V {e['V']:+.2e} "
+                          f"A {e['A']:+.2e} phi {e['phi_L2']:.2e}", flush=True)
+            rates = {}
+            for label in dict.fromkeys(r["label"] for r in rows):
+                sel = [r for r in rows if r["label"] == label]
+                rates[label] = {q: fit([r["h"] for r in sel], [r["errors"][q] for r in sel],
+                                       p.eps) for q in (*QUANTITIES, "phi_L2")}
+            out[name]["starts"][start] = {"ref": ref["final"], "ref_cpu_s": ref["cpu_s"],
+                                          "ref_command": command(name, "spectral", cfg["ref"],
+                                                                 cfg["steps"], phi0),
+                                          "rows": rows, "rates": rates}
     return out
-
-
-def q2_diagnosis(plan: dict) -> dict:
-    """Q2 with nodal products and lumped mass (default), products at quadrature points, and
-    the consistent mass: which one removes the 3D stall?"""
-    from fem_ade.scenes import get_scene
-
-    scene = get_scene(plan["q2"]["scene"])
-    p = scene.params
-    ref = run(scene, "spectral", 4 * max(plan["q2"]["ns"]), plan["steps"])
-    rows = []
-    for label in ("Q2", "Q2 quadrature", "Q2 consistent"):
-        for n in plan["q2"]["ns"]:
-            row = run(scene, label, n, plan["steps"])
-            row.update(h=p.L / (2 * n), errors=errors(row, ref, p.L))
-            rows.append(row)
-            print(f"  q2: {label:14s} n={n:3d} E {row['errors']['E']:.2e} V "
-                  f"{row['errors']['V']:.2e} A {row['errors']['A']:.2e} phi "
-                  f"{row['errors']['phi_L2']:.2e} ({row['wall_s']:.0f} s)", flush=True)
-    return {"scene": plan["q2"]["scene"], "ref_n": 4 * max(plan["q2"]["ns"]), "rows": rows}
 
 
 def steady(plan: dict) -> dict:
@@ -188,46 +231,51 @@ def steady(plan: dict) -> dict:
 
     cfg = plan["steady"]
     scene = get_scene(cfg["scene"])
+    extra = ("--recipe", "steady", "--until-steady", "1e-10")
 
     def one(label, n):
-        backend, options, _ = DISCRETISATIONS[label]
-        t0, c0 = time.perf_counter(), time.process_time()
+        backend, options = METHODS[label]
+        t0 = time.perf_counter()
         r = simulate(scene, backend=backend, n=n, dt=100 * scene.dt, scheme="stabilized",
                      constraints="exact", accelerate=True, until_steady=1e-10, every=50,
-                     max_steps=20000, backend_options=options, allow_underresolved=True,
-                     out=None)
+                     max_steps=20000, backend_options=dict(options), allow_underresolved=True,
+                     out=None, render=False)
         sh = r.shape or {}
-        return {"label": label, "n": n, "wall_s": time.perf_counter() - t0,
-                "cpu_s": time.process_time() - c0, "steps": r.steps,
-                "status": r.status, "final": {q: float(r.final[q]) for q in QUANTITIES},
+        p = order_of(label) if backend == "fem" else 1
+        cmd = command(cfg["scene"], label, n, 0, extra=extra).replace(
+            " --steps 0 --every 0", " --every 50")
+        return {"label": label, "n": n, "nodes": n * p, "wall_s": time.perf_counter() - t0,
+                "cpu_s": r.cpu_s + r.setup_cpu_s, "steps": r.steps, "status": r.status,
+                "final": {q: float(r.final[q]) for q in QUANTITIES}, "command": cmd,
                 "shape": {k: sh.get(k) for k in ("label", "components", "genus",
                                                  "reduced_volume", "reduced_area_difference")}}
 
     ref = one("spectral", cfg["ref"])
     rows = []
-    for label in ("spectral", "Q1"):
-        for n in cfg[label]:
+    for label, nodes in cfg["levels"].items():
+        for n in levels(label, nodes):
             row = one(label, n)
             row["errors"] = {q: abs(row["final"][q] - ref["final"][q]) / abs(ref["final"][q])
                              for q in ("E", "V", "A")}
             for k in ("reduced_volume", "reduced_area_difference"):
                 if row["shape"][k] is not None and ref["shape"][k] is not None:
                     row["errors"][k] = abs(row["shape"][k] - ref["shape"][k])
-            row["h"] = scene.params.L / n
+            row["h"] = scene.params.L / row["nodes"]
             rows.append(row)
-            print(f"  steady: {label:8s} n={n:3d} {row['status']} {row['steps']} steps "
-                  f"E {row['errors']['E']:.2e} v {row['shape']['reduced_volume']} "
-                  f"{row['shape']['label']} ({row['wall_s']:.0f} s)", flush=True)
+            print(f"  steady: {label:8s} nodes={row['nodes']:3d} {row['status']} "
+                  f"{row['steps']} steps E {row['errors']['E']:.2e} v "
+                  f"{row['shape']['reduced_volume']} {row['shape']['label']} "
+                  f"({row['cpu_s']:.0f} s)", flush=True)
     rates = {lab: {q: fit([r["h"] for r in rows if r["label"] == lab],
                           [r["errors"][q] for r in rows if r["label"] == lab],
                           scene.params.eps) for q in ("E", "V", "A")}
-             for lab in ("spectral", "Q1")}
+             for lab in cfg["levels"]}
     return {"scene": cfg["scene"], "ref": ref, "rows": rows, "rates": rates}
 
 
 def temporal(plan: dict) -> dict:
     """Order in Δt at t = T (T = steps × Δt₀), against the paper's scheme at Δt₀/8; and the
-    stabilized scheme's slowdown."""
+    stabilized scheme's slowdown (spectral: the time error is the same on every backend)."""
     from fem_ade.backend import make_backend
     from fem_ade.loop import run_loop
     from fem_ade.scenes import get_scene
@@ -263,7 +311,6 @@ def temporal(plan: dict) -> dict:
         if len(sel) >= 2:
             orders[scheme] = float(np.polyfit(np.log([r["dt"] for r in sel]),
                                               np.log([r["errors"]["phi_L2"] for r in sel]), 1)[0])
-    # slowdown: how long the stabilized scheme takes to reach E_paper(T)
     target = ref.final["E"]
 
     class Reached(Exception):
@@ -288,10 +335,8 @@ def temporal(plan: dict) -> dict:
             pass
         hit = watch.hit
         s0 = be.stab[0] if be.stab else float("nan")
-        entry = {"factor": f, "dt": dt, "s0": s0,
-                 "t_reach": hit["t"] if hit else None,
-                 "slowdown": hit["t"] / T if hit else None,
-                 "predicted": (1.0 / dt + s0) * dt}
+        entry = {"factor": f, "dt": dt, "s0": s0, "t_reach": hit["t"] if hit else None,
+                 "slowdown": hit["t"] / T if hit else None, "predicted": (1.0 / dt + s0) * dt}
         slow.append(entry)
         print(f"  slowdown: stabilized dt = {f:g} dt0 reaches E_paper(T) at t = "
               f"{entry['t_reach']} ({entry['slowdown']}x T; 1 + s0 dt = "
@@ -311,12 +356,20 @@ def _strip(obj):
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="seconds (the test suite)")
-    ap.add_argument("--parts", nargs="*", default=["spatial", "q2", "steady", "temporal"])
+    ap.add_argument("--parts", nargs="*", default=["spatial", "steady", "temporal"])
     ap.add_argument("--out", default=str(OUT))
+    ap.add_argument("--runs", default=None,
+                    help="where the resolved starts' run folders go (default runs/convergence, "
+                         "under --out in quick mode)")
     ap.add_argument("--scenes", nargs="*", default=None,
                     help="the spatial part for these scenes only (the others' results kept)")
+    ap.add_argument("--repeats", type=int, default=None,
+                    help="run each point this many times, keep the least CPU time (default 2; "
+                         "quick 1)")
     args = ap.parse_args(argv)
-    quick = args.quick or bool(os.environ.get("CI"))
+    global REPEATS
+    REPEATS = args.repeats or (1 if args.quick else 2)
+    quick = args.quick
     plan = QUICK if quick else FULL
     if args.scenes:
         unknown = set(args.scenes) - set(plan["scenes"])
@@ -327,12 +380,13 @@ def main(argv=None) -> dict:
                                    if k in args.scenes}}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    runs = Path(args.runs) if args.runs else (out / "runs" if quick else Path("runs/convergence"))
     name = "convergence_quick.json" if quick else "convergence.json"
     path = out / name
     results = json.loads(path.read_text()) if path.is_file() and not quick else {}
     t0 = time.perf_counter()
-    for part, fn in (("spatial", lambda: spatial(plan, quick)), ("q2", lambda: q2_diagnosis(plan)),
-                     ("steady", lambda: steady(plan)), ("temporal", lambda: temporal(plan))):
+    for part, fn in (("spatial", lambda: spatial(plan, runs)), ("steady", lambda: steady(plan)),
+                     ("temporal", lambda: temporal(plan))):
         if part in args.parts:
             print(f"{part}:", flush=True)
             t1 = time.perf_counter()
@@ -340,66 +394,79 @@ def main(argv=None) -> dict:
             results[part] = ({**results.get(part, {}), **new} if part == "spatial" else new)
             results.setdefault("part_s", {})[part] = time.perf_counter() - t1
             path.write_text(json.dumps(results, indent=1))  # resumable by part
+    results.pop("q2", None)  # the earlier study's Q2 diagnosis: see convergence_notes.md
     results["run_s"] = sum(results.get("part_s", {}).values()) or time.perf_counter() - t0
     from fem_ade.output import package_versions
 
-    results["machine"] = {"cores": os.cpu_count(), "versions": package_versions()}
+    results["machine"] = {"cores": os.cpu_count(), "versions": package_versions(),
+                          "threads": {k: os.environ.get(k) for k in
+                                      ("OPENBLAS_NUM_THREADS", "FEM_ADE_FFT_WORKERS")}}
     path.write_text(json.dumps(results, indent=1))
     report(results, out, quick)
     return results
 
 
-def report(results: dict, out: Path, quick: bool) -> None:
-    """convergence.md and the error-against-h plots."""
-    from matplotlib.figure import Figure
+def _rate(v) -> str:
+    return f"{v:.2f}" if v is not None else "—"
 
+
+def report(results: dict, out: Path, quick: bool) -> None:
+    """convergence.md and the error-against-nodes plots."""
+
+    suffix = "_quick" if quick else ""
+    m = results["machine"]
     lines = ["# Convergence in space and in time", "",
              f"Generated by `studies/convergence.py` ({'quick' if quick else 'full'} mode; "
-             f"{results.get('run_s', 0):.0f} s on {results['machine']['cores']} cores; "
-             f"numpy {results['machine']['versions'].get('numpy')}, scipy "
-             f"{results['machine']['versions'].get('scipy')}, pyamg "
-             f"{results['machine']['versions'].get('pyamg')}). Errors are relative; rates are "
-             "fitted over the levels with node spacing h ≤ ε.", ""]
+             f"{results.get('run_s', 0):.0f} s on {m['cores']} cores, one thread; numpy "
+             f"{m['versions'].get('numpy')}, scipy {m['versions'].get('scipy')}). Errors are "
+             "relative and signed (the sign of the error changes from grid to grid where the "
+             "nodes fall differently in the interface layer); rates are the slopes of |error| "
+             "over the levels with node spacing h = L/nodes ≤ ε. `pP` is the FEM of order P "
+             "(GLL nodes, exact fast-diagonalization solve); CPU seconds include the set-up.",
+             ""]
     sp = results.get("spatial", {})
+    pngs = []
     for name, r in sp.items():
-        lines += [f"## {name}: the paper's scheme, {r['steps']} steps, against spectral "
-                  f"n = {r['ref_n']} (ε = {r['eps']})", "",
-                  "| discretisation | n | h/ε | wall s | " + " | ".join(
-                      f"err {q}" for q in (*QUANTITIES, "phi_L2")) + " |",
-                  "|---|---|---|---|" + "---|" * (len(QUANTITIES) + 1)]
-        for row in r["rows"]:
-            lines.append(f"| {row['label']} | {row['n']} | {row['h'] / r['eps']:.2f} | "
-                         f"{row['wall_s']:.1f} | " + " | ".join(
-                             f"{row['errors'][q]:.2e}" for q in (*QUANTITIES, "phi_L2")) + " |")
-        lines += ["", "Observed rates (h ≤ ε):", "",
-                  "| discretisation | " + " | ".join((*QUANTITIES, "phi_L2")) + " |",
-                  "|---|" + "---|" * (len(QUANTITIES) + 1)]
-        for label, rates in sorted(r["rates"].items()):
-            lines.append(f"| {label} | " + " | ".join(
-                f"{rates[q]:.2f}" if rates[q] is not None else "—"
-                for q in (*QUANTITIES, "phi_L2")) + " |")
-        lines.append("")
-    if "q2" in results:
-        lines += [f"## Q2: what limits it ({results['q2'].get('scene', '')})", "",
-                  "| variant | n | err E | err V | err A | err φ |", "|---|---|---|---|---|---|"]
-        for row in results["q2"]["rows"]:
-            e = row["errors"]
-            lines.append(f"| {row['label']} | {row['n']} | {e['E']:.2e} | {e['V']:.2e} | "
-                         f"{e['A']:.2e} | {e['phi_L2']:.2e} |")
-        lines.append("")
+        for start, s in r["starts"].items():
+            what = ("the paper's initial condition" if start == "paper" else
+                    f"the spectral state after {r['start_steps']} steps (resolved start)")
+            lines += [f"## {name} from {what}: {r['steps']} steps of the paper's scheme "
+                      f"against spectral n = {r['ref_n']} (ε = {r['eps']})", "",
+                      f"Reference: E = {s['ref']['E']:.10g} (`{s['ref_command']}`)", ""]
+            if start == "resolved":
+                lines += [f"Start: `{r['start_command']}`", ""]
+            lines += ["| discretisation | n | nodes | h/ε | CPU s | " + " | ".join(
+                f"err {q}" for q in (*QUANTITIES, "phi_L2")) + " |",
+                "|---|---|---|---|---|" + "---|" * (len(QUANTITIES) + 1)]
+            for row in s["rows"]:
+                lines.append(f"| {row['label']} | {row['n']} | {row['nodes']} | "
+                             f"{row['h'] / r['eps']:.2f} | {row['cpu_s']:.2f} | " + " | ".join(
+                                 f"{row['errors'][q]:+.2e}" for q in QUANTITIES) +
+                             f" | {row['errors']['phi_L2']:.2e} |")
+            lines += ["", "Observed rates (h ≤ ε):", "",
+                      "| discretisation | " + " | ".join((*QUANTITIES, "phi_L2")) + " |",
+                      "|---|" + "---|" * (len(QUANTITIES) + 1)]
+            for label, rates in s["rates"].items():
+                lines.append(f"| {label} | " + " | ".join(
+                    _rate(rates[q]) for q in (*QUANTITIES, "phi_L2")) + " |")
+            png = f"convergence-{name}-{start}{suffix}.png"
+            lines += ["", f"![|error in E| against nodes per axis]({png})", ""]
+            _plot(s["rows"], f"{name}, {start} start", out / png)
+            pngs.append(png)
     if "steady" in results:
         st = results["steady"]
         lines += [f"## Steady state of {st['scene']} (exact constraints, stabilized 100× Δt, "
                   f"momentum, until 1e-10), against spectral n = {st['ref']['n']}", "",
-                  f"Reference: E = {st['ref']['final']['E']:.8g}, {st['ref']['shape']['label']},"
-                  f" v = {st['ref']['shape']['reduced_volume']}", "",
-                  "| discretisation | n | steps | wall s | label | err E | err V | err A | "
-                  "Δv | Δ(Δa) |", "|---|---|---|---|---|---|---|---|---|---|"]
+                  f"Reference: E = {st['ref']['final']['E']:.10g}, "
+                  f"{st['ref']['shape']['label']}, v = {st['ref']['shape']['reduced_volume']}",
+                  "", "| discretisation | n | nodes | steps | CPU s | label | err E | err V | "
+                  "err A | Δv | Δ(Δa) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
         for row in st["rows"]:
             e = row["errors"]
-            lines.append(f"| {row['label']} | {row['n']} | {row['steps']} | {row['wall_s']:.0f}"
-                         f" | {row['shape']['label']} | {e['E']:.2e} | {e['V']:.2e} | "
-                         f"{e['A']:.2e} | {e.get('reduced_volume', float('nan')):.2e} | "
+            lines.append(f"| {row['label']} | {row['n']} | {row['nodes']} | {row['steps']} | "
+                         f"{row['cpu_s']:.0f} | {row['shape']['label']} | {e['E']:.2e} | "
+                         f"{e['V']:.2e} | {e['A']:.2e} | "
+                         f"{e.get('reduced_volume', float('nan')):.2e} | "
                          f"{e.get('reduced_area_difference', float('nan')):.2e} |")
         lines += ["", "Rates: " + "; ".join(
             f"{lab}: " + ", ".join(f"{q} {v:.2f}" for q, v in rates.items() if v is not None)
@@ -428,25 +495,24 @@ def report(results: dict, out: Path, quick: bool) -> None:
     notes = out / "convergence_notes.md"
     if notes.is_file() and not quick:
         lines += [notes.read_text()]
-    if sp:
-        fig = Figure(figsize=(5.0 * len(sp), 4.2), dpi=100)
-        axes = fig.subplots(1, len(sp), squeeze=False)[0]
-        for ax, (name, r) in zip(axes, sp.items(), strict=True):
-            for label in sorted({row["label"] for row in r["rows"]}):
-                sel = [row for row in r["rows"] if row["label"] == label]
-                ax.loglog([row["h"] / r["eps"] for row in sel],
-                          [max(row["errors"]["E"], 1e-16) for row in sel], "o-", label=label,
-                          color=COLOURS.get(label))
-            ax.axvline(1.0, color="0.6", ls=":", lw=1)
-            ax.set(xlabel="node spacing h / ε", ylabel="relative error in E", title=name)
-            ax.grid(True, which="both", alpha=0.3)
-            ax.legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(out / ("convergence_quick.png" if quick else "convergence.png"))
-        png = "convergence_quick.png" if quick else "convergence.png"
-        lines += [f"![error in E against h]({png})"]
-    (out / ("convergence_quick.md" if quick else "convergence.md")).write_text(
-        "\n".join(lines) + "\n")
+    (out / f"convergence{suffix}.md").write_text("\n".join(lines) + "\n")
+
+
+def _plot(rows, title, path) -> None:
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6.4, 4.6), dpi=110)
+    ax = fig.subplots()
+    for label in dict.fromkeys(r["label"] for r in rows):
+        sel = [r for r in rows if r["label"] == label]
+        ax.loglog([r["nodes"] for r in sel], [max(abs(r["errors"]["E"]), 1e-16) for r in sel],
+                  "o-" if "graded" not in label else "s--", label=label,
+                  color=COLOURS.get(label), lw=1.6, ms=5)
+    ax.set(xlabel="nodes per axis", ylabel="|relative error in E|", title=title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path)
 
 
 if __name__ == "__main__":

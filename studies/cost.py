@@ -1,23 +1,24 @@
-"""What each digit of accuracy costs: error against time, for transients and steady shapes.
+"""What each digit of accuracy costs: CPU time against the error in E, for every
+discretisation of ``studies/convergence.py`` (issue 21).
 
-Reads the runs of ``studies/convergence.py`` (``convergence.json``: every discretisation and
-level of the spatial study with its error and its time, and the steady-state study) and adds
-its own runs at the same reference: the FEM Q1 solvers (``amg``, ``chebyshev`` beside the
-direct ``fft`` path) and the stabilized scheme at larger Δt (fewer steps to the same time
-T, so its error includes the time error). Every point is one (backend, order, mesh, n,
-scheme, Δt, solver) run.
+Reads ``convergence.json`` — every run of the spatial study (scene × start × discretisation ×
+level) with its errors, its CPU seconds (set-up and loop, one thread) and the command that
+repeats it — and writes
 
-Writes ``cost.json``, ``cost.md`` (the tables: time to reach 1 %, 0.1 %, 0.01 % error in E,
-per discretisation, for the transient and for the steady state) and ``cost-SCENE.png`` (error
-in E against CPU time, every point, the Pareto front drawn) into ``--out``.
+* ``cost.json``: one entry per run, ``{"scene", "start", "method", "order", "mesh", "n",
+  "nodes", "cpu_s", "E_err", "V_err", "A_err", "command"}`` (errors relative, unsigned), and
+  per (scene, start) the time to each accuracy of every discretisation and the Pareto front;
+* ``cost.md``: the tables — CPU seconds to reach 1e-2, 1e-3, 1e-4, 1e-5 in E, the best FEM
+  against the spectral reference at each accuracy — and the steady-state table;
+* ``cost-SCENE-START.png``: error in E against CPU time, every point, the Pareto front drawn.
 
-Times are CPU seconds of the process (set-up included; one FFT/BLAS thread): on a shared
-machine they move less than wall time. Time to an accuracy is interpolated (log–log) along
-each discretisation's measured points, never extrapolated: "—" means no measured level
-reached it.
+Time to an accuracy is interpolated (log–log) along each discretisation's measured points in
+order of cost, never extrapolated ("—": no measured level reached it); a dearer level never
+counts as worse than a cheaper one of the same discretisation did (the error of a transient
+is not monotone in the resolution).
 
-    python studies/cost.py                       # needs convergence.json (full mode)
-    python studies/cost.py --quick --out /tmp/c  # its own small 2D study (seconds)
+    python studies/cost.py                        # needs convergence.json (full mode)
+    python studies/cost.py --quick --out /tmp/c   # its own quick 2D convergence (seconds)
 """
 
 from __future__ import annotations
@@ -26,29 +27,11 @@ import argparse
 import importlib.util
 import json
 import math
-import os
 import time
 from pathlib import Path
 
 OUT = Path(__file__).resolve().parent / "results"
-TARGETS = (1e-2, 1e-3, 1e-4)
-
-#: the runs this study adds, per scene: (label, n, scheme, Δt factor, options)
-EXTRA_FULL = {
-    "discocyte": [("Q1", n, "paper", 1, {"solver": s}) for s in ("amg", "chebyshev")
-                  for n in (32, 48, 64)]
-    + [(lab, n, "stabilized", f, {}) for lab in ("spectral", "Q1") for n in (48, 64)
-       for f in (5, 25)],
-}
-QUICK_SPATIAL = {
-    "steps": 10,
-    "scenes": {"ellipse-2d": {"ref": 96, "spectral": (24, 32, 48), "Q1": (24, 32, 48, 64),
-                              "Q2": (12, 16, 24)}},
-}
-EXTRA_QUICK = {
-    "ellipse-2d": [("Q1", n, "paper", 1, {"solver": "amg"}) for n in (32, 48)]
-    + [("spectral", 48, "stabilized", 5, {}), ("Q1", 48, "stabilized", 5, {})],
-}
+TARGETS = (1e-2, 1e-3, 1e-4, 1e-5)
 
 
 def _convergence():
@@ -88,163 +71,164 @@ def pareto(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
     return front
 
 
-def extra_runs(conv, scene_name: str, plan: list, steps: int, ref_n: int) -> list[dict]:
-    """The solver and Δt variants, against the same reference as the spatial study."""
-    from fem_ade.scenes import get_scene
-
-    scene = get_scene(scene_name)
-    ref = conv.run(scene, "spectral", ref_n, steps)
-    rows = []
-    for label, n, scheme, f, options in plan:
-        m = max(1, round(steps / f))
-        row = conv.run(scene, label, n, m, scheme=scheme, dt=scene.dt * steps / m, **options)
-        row.update(h=scene.params.L / (n * conv.DISCRETISATIONS[label][2]),
-                   errors=conv.errors(row, ref, scene.params.L))
-        rows.append(row)
-        print(f"  {scene_name} {label} n={n} {scheme} dt x{steps / m:g} {options or ''}: "
-              f"E err {row['errors']['E']:.2e}, {row['cpu_s']:.1f} s cpu", flush=True)
-    return rows
+def entries(spatial: dict) -> list[dict]:
+    """cost.json's runs: one per (scene, start, discretisation, level)."""
+    out = []
+    for scene, r in spatial.items():
+        for start, s in r["starts"].items():
+            for row in s["rows"]:
+                e = row["errors"]
+                out.append({"scene": scene, "start": start, "label": row["label"],
+                            "method": row["method"], "order": row["order"],
+                            "mesh": row["mesh"], "n": row["n"], "nodes": row["nodes"],
+                            "cpu_s": row["cpu_s"], "E_err": abs(e["E"]), "V_err": abs(e["V"]),
+                            "A_err": abs(e["A"]), "command": row["command"]})
+    return out
 
 
-def key(row: dict) -> str:
-    """The discretisation a point belongs to (its curve in the plots and tables)."""
-    name = row["label"]
-    solver = (row.get("options") or {}).get("solver")
-    if solver and name == "Q1" and solver != "fft":
-        name += f" {solver}"
-    if row.get("scheme", "paper") != "paper":
-        factor = row["dt"] / row["dt_ref"] if row.get("dt_ref") else None
-        name += f" stabilized Δt×{factor:g}" if factor else " stabilized"
-    return name
+def summarize(runs: list[dict]) -> dict:
+    """Per (scene, start): time to each target per discretisation, the best FEM against the
+    spectral reference, the Pareto front."""
+    out = {}
+    for key in dict.fromkeys((r["scene"], r["start"]) for r in runs):
+        sel = [r for r in runs if (r["scene"], r["start"]) == key]
+        curves: dict[str, list] = {}
+        for r in sel:
+            curves.setdefault(r["label"], []).append((r["cpu_s"], r["E_err"]))
+        tt = {c: {f"{t:g}": time_to(p, t) for t in TARGETS} for c, p in curves.items()}
+        best = {}
+        for t in TARGETS:
+            spec = tt.get("spectral", {}).get(f"{t:g}")
+            fem = [(v[f"{t:g}"], c) for c, v in tt.items()
+                   if c != "spectral" and v[f"{t:g}"] is not None]
+            b = min(fem) if fem else (None, None)
+            best[f"{t:g}"] = {"spectral_s": spec, "fem_s": b[0], "fem": b[1],
+                              "ratio": b[0] / spec if b[0] is not None and spec else None}
+        front = [{"cpu_s": t, "E_err": e,
+                  "label": next(r["label"] for r in sel if r["cpu_s"] == t and r["E_err"] == e)}
+                 for t, e in pareto([p for c in curves.values() for p in c])]
+        out[f"{key[0]}/{key[1]}"] = {"time_to": tt, "best_fem": best, "pareto": front}
+    return out
 
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--quick", action="store_true", help="its own small 2D study (seconds)")
+    ap.add_argument("--quick", action="store_true", help="its own quick 2D study (seconds)")
     ap.add_argument("--convergence", default=str(OUT / "convergence.json"),
                     help="the convergence study's results (full mode)")
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args(argv)
-    quick = args.quick or bool(os.environ.get("CI"))
-    os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    conv = _convergence()
     t0 = time.perf_counter()
-    if quick:
-        spatial = conv._strip(conv.spatial(QUICK_SPATIAL, True))
-        steady = None
-        extra_plan = EXTRA_QUICK
+    if args.quick:
+        conv = _convergence()
+        data = conv.main(["--quick", "--parts", "spatial", "steady", "--out", str(out)])
     else:
         path = Path(args.convergence)
         if not path.is_file():
             raise SystemExit(f"cost.py: {path} not found: run studies/convergence.py first")
         data = json.loads(path.read_text())
-        spatial, steady = data.get("spatial", {}), data.get("steady")
-        extra_plan = EXTRA_FULL
-    cached = out / ("cost.json" if not quick else "cost_quick.json")
-    previous = json.loads(cached.read_text()) if cached.is_file() and not quick else {}
-    scenes = {}
-    from fem_ade.scenes import get_scene
-
-    for name, r in spatial.items():
-        dt0 = get_scene(name).dt
-        rows = [dict(row, dt_ref=dt0) for row in r["rows"]]
-        extra = previous.get("scenes", {}).get(name, {}).get("extra")
-        if extra is None and name in extra_plan:
-            extra = conv._strip(extra_runs(conv, name, extra_plan[name], r["steps"], r["ref_n"]))
-        rows += [dict(row, dt_ref=dt0) for row in extra or []]
-        curves: dict[str, list] = {}
-        for row in rows:
-            curves.setdefault(key(row), []).append((row["cpu_s"], row["errors"]["E"]))
-        scenes[name] = {
-            "steps": r["steps"], "ref_n": r["ref_n"], "extra": extra or [],
-            "points": [{"curve": key(row), "n": row["n"], "cpu_s": row["cpu_s"],
-                        "wall_s": row["wall_s"], "err_E": row["errors"]["E"]} for row in rows],
-            "time_to": {c: {f"{t:g}": time_to(p, t) for t in TARGETS}
-                        for c, p in sorted(curves.items())},
-            "pareto": [{"cpu_s": t, "err_E": e,
-                        "curve": next(key(row) for row in rows
-                                      if row["cpu_s"] == t and row["errors"]["E"] == e)}
-                       for t, e in pareto([p for c in curves.values() for p in c])]}
-        cached.write_text(json.dumps({"scenes": scenes}, indent=1))
-    steady_table = None
-    if steady:
-        curves = {}
-        for row in steady["rows"]:
-            curves.setdefault(row["label"], []).append((row.get("cpu_s", row["wall_s"]),
-                                                        row["errors"]["E"]))
-        steady_table = {"scene": steady["scene"],
-                        "time_to": {c: {f"{t:g}": time_to(p, t) for t in TARGETS}
-                                    for c, p in sorted(curves.items())},
-                        "points": [{"curve": row["label"], "n": row["n"], "steps": row["steps"],
-                                    "cpu_s": row.get("cpu_s", row["wall_s"]),
-                                    "err_E": row["errors"]["E"]} for row in steady["rows"]]}
-    from fem_ade.output import package_versions
-
-    result = {"scenes": scenes, "steady": steady_table, "run_s": time.perf_counter() - t0,
-              "machine": {"cores": os.cpu_count(), "versions": package_versions()}}
-    cached.write_text(json.dumps(result, indent=1))
-    report(result, out, quick)
+    runs = entries(data.get("spatial", {}))
+    steady = data.get("steady")
+    result = {"runs": runs, "summary": summarize(runs), "steady": steady_table(steady),
+              "run_s": time.perf_counter() - t0, "machine": data.get("machine")}
+    suffix = "_quick" if args.quick else ""
+    (out / f"cost{suffix}.json").write_text(json.dumps(result, indent=1) + "\n")
+    report(result, out, suffix)
     return result
+
+
+def steady_table(steady: dict | None) -> dict | None:
+    if not steady:
+        return None
+    curves: dict[str, list] = {}
+    for row in steady["rows"]:
+        curves.setdefault(row["label"], []).append((row["cpu_s"], row["errors"]["E"]))
+    return {"scene": steady["scene"],
+            "time_to": {c: {f"{t:g}": time_to(p, t) for t in TARGETS} for c, p in curves.items()},
+            "points": [{"label": row["label"], "n": row["n"], "nodes": row["nodes"],
+                        "steps": row["steps"], "cpu_s": row["cpu_s"],
+                        "E_err": row["errors"]["E"], "command": row["command"]}
+                       for row in steady["rows"]]}
 
 
 def _fmt(t):
     return "—" if t is None else f"{t:.3g}"
 
 
-def report(result: dict, out: Path, quick: bool) -> None:
-    from matplotlib.figure import Figure
+def report(result: dict, out: Path, suffix: str) -> None:
 
-    suffix = "_quick" if quick else ""
-    v = result["machine"]["versions"]
+    machine = result.get("machine") or {}
+    v = machine.get("versions", {})
     lines = ["# What accuracy costs", "",
-             f"Generated by `studies/cost.py` ({'quick' if quick else 'full'} mode; "
-             f"{result['run_s']:.0f} s on {result['machine']['cores']} cores; numpy "
-             f"{v.get('numpy')}, scipy {v.get('scipy')}, pyamg {v.get('pyamg')}, scikit-fem "
-             f"{v.get('scikit-fem', v.get('skfem'))}). Times are CPU seconds (set-up "
-             "included, one FFT thread); errors are relative errors in E against the fine "
-             "spectral reference of `studies/convergence.py`.", ""]
-    for name, s in result["scenes"].items():
-        lines += [f"## {name}: transient ({s['steps']} steps of the paper's Δt, reference "
-                  f"spectral n = {s['ref_n']})", "",
+             f"Generated by `studies/cost.py` from `convergence{suffix}.json` (numpy "
+             f"{v.get('numpy')}, scipy {v.get('scipy')}; {machine.get('cores')} cores). Times "
+             "are CPU seconds of one thread (set-up and loop); errors are relative errors in E "
+             "against the fine spectral reference. `pP`: the FEM of order P (GLL nodes, exact "
+             "fast-diagonalization solve). Each run's command is in `cost.json`.", ""]
+    for key, s in result["summary"].items():
+        scene, start = key.split("/")
+        what = "the paper's initial condition" if start == "paper" else "a resolved start"
+        lines += [f"## {scene} from {what}", "",
                   "CPU seconds to reach a relative error in E of:", "",
-                  "| discretisation | 1 % | 0.1 % | 0.01 % |", "|---|---|---|---|"]
+                  "| discretisation | " + " | ".join(f"{t:g}" for t in TARGETS) + " |",
+                  "|---|" + "---|" * len(TARGETS)]
         for c, tt in s["time_to"].items():
             lines.append(f"| {c} | " + " | ".join(_fmt(tt[f"{t:g}"]) for t in TARGETS) + " |")
+        lines += ["", "The best FEM against the spectral reference:", "",
+                  "| error in E | spectral s | best FEM s | which | FEM / spectral |",
+                  "|---|---|---|---|---|"]
+        for t in TARGETS:
+            b = s["best_fem"][f"{t:g}"]
+            lines.append(f"| {t:g} | {_fmt(b['spectral_s'])} | {_fmt(b['fem_s'])} | "
+                         f"{b['fem'] or '—'} | {_fmt(b['ratio'])} |")
+        png = f"cost-{scene}-{start}{suffix}.png"
         lines += ["", "Pareto front (no other run is both cheaper and more accurate):", "",
                   "| CPU s | err E | discretisation |", "|---|---|---|"]
-        lines += [f"| {p['cpu_s']:.3g} | {p['err_E']:.2e} | {p['curve']} |" for p in s["pareto"]]
-        lines += ["", f"![error against time]({'cost-' + name + suffix + '.png'})", ""]
-        fig = Figure(figsize=(6.4, 4.6), dpi=100)
-        ax = fig.subplots()
-        curves = sorted({p["curve"] for p in s["points"]})
-        for c in curves:
-            pts = sorted((p["cpu_s"], p["err_E"]) for p in s["points"] if p["curve"] == c)
-            ax.loglog(*zip(*pts, strict=True), "o-" if "stabilized" not in c else "s--",
-                      label=c, ms=4)
-        front = [(p["cpu_s"], p["err_E"]) for p in s["pareto"]]
-        ax.loglog(*zip(*front, strict=True), color="k", lw=2.5, alpha=0.25, label="Pareto front")
-        for t in TARGETS:
-            ax.axhline(t, color="0.7", lw=0.8, ls=":")
-        ax.set(xlabel="CPU time (s)", ylabel="relative error in E",
-               title=f"{name}: error against cost")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(out / f"cost-{name}{suffix}.png")
+        lines += [f"| {p['cpu_s']:.3g} | {p['E_err']:.2e} | {p['label']} |"
+                  for p in s["pareto"]]
+        lines += ["", f"![error against time]({png})", ""]
+        _plot([r for r in result["runs"] if (r["scene"], r["start"]) == (scene, start)],
+              s["pareto"], f"{scene}, {start} start: error against cost", out / png)
     st = result.get("steady")
     if st:
         lines += [f"## {st['scene']}: steady state (exact constraints, stabilized 100× Δt, "
                   "momentum)", "", "CPU seconds to reach a relative error in E of:", "",
-                  "| discretisation | 1 % | 0.1 % | 0.01 % |", "|---|---|---|---|"]
+                  "| discretisation | " + " | ".join(f"{t:g}" for t in TARGETS) + " |",
+                  "|---|" + "---|" * len(TARGETS)]
         for c, tt in st["time_to"].items():
             lines.append(f"| {c} | " + " | ".join(_fmt(tt[f"{t:g}"]) for t in TARGETS) + " |")
-        lines += ["", "| discretisation | n | steps | CPU s | err E |", "|---|---|---|---|---|"]
-        lines += [f"| {p['curve']} | {p['n']} | {p['steps']} | {p['cpu_s']:.3g} | "
-                  f"{p['err_E']:.2e} |" for p in st["points"]]
+        lines += ["", "| discretisation | n | nodes | steps | CPU s | err E |",
+                  "|---|---|---|---|---|---|"]
+        lines += [f"| {p['label']} | {p['n']} | {p['nodes']} | {p['steps']} | "
+                  f"{p['cpu_s']:.3g} | {p['E_err']:.2e} |" for p in st["points"]]
         lines.append("")
+    notes = out / "cost_notes.md"
+    if notes.is_file() and not suffix:
+        lines += [notes.read_text()]
     (out / f"cost{suffix}.md").write_text("\n".join(lines) + "\n")
+
+
+def _plot(runs, front, title, path) -> None:
+    from matplotlib.figure import Figure
+
+    conv = _convergence()
+    fig = Figure(figsize=(6.6, 4.8), dpi=110)
+    ax = fig.subplots()
+    for label in dict.fromkeys(r["label"] for r in runs):
+        pts = sorted((r["cpu_s"], max(r["E_err"], 1e-16)) for r in runs if r["label"] == label)
+        ax.loglog(*zip(*pts, strict=True), "o-" if "graded" not in label else "s--",
+                  label=label, ms=4, lw=1.4, color=conv.COLOURS.get(label))
+    pts = [(p["cpu_s"], max(p["E_err"], 1e-16)) for p in front]
+    ax.loglog(*zip(*pts, strict=True), color="k", lw=5, alpha=0.18, label="Pareto front")
+    for t in TARGETS:
+        ax.axhline(t, color="0.7", lw=0.8, ls=":")
+    ax.set(xlabel="CPU seconds (one thread)", ylabel="|relative error in E|", title=title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path)
 
 
 if __name__ == "__main__":
