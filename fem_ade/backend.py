@@ -146,11 +146,12 @@ class BackendBase:
             raise ModelError(f"the {cls.name} backend takes no option(s) {sorted(unknown)}")
         params = scene.params.for_constraints(constraints).validate()
         scene.validate()
-        if not isinstance(n, int) or isinstance(n, bool) or n < 8:
-            raise ModelError(f"n must be an integer >= 8, got {n}")
+        least = cls.min_cells(**options)
+        if not isinstance(n, int) or isinstance(n, bool) or n < least:
+            raise ModelError(f"n must be an integer >= {least}, got {n}")
         spacing = cls.check_options(scene, n, **options)
         check_resolution(params, n, dt, allow_underresolved=allow_underresolved,
-                         check_dt=scheme == "paper", spacing=spacing)
+                         check_dt=scheme == "paper", spacing=spacing, min_n=least)
         need, have = cls.memory_bytes(scene, n, **options), physical_memory()
         if need > 0.8 * have:
             raise ModelError(f"n = {n} needs about {need / 2**30:.3g} GB of memory with the "
@@ -163,6 +164,11 @@ class BackendBase:
 
     #: memory per unknown (measured, with margin: the spectral step's dozen grid arrays)
     bytes_per_dof = 400.0
+
+    @classmethod
+    def min_cells(cls, **options) -> int:
+        """The smallest n a run takes (a grid of 8 points per axis)."""
+        return 8
 
     @classmethod
     def check_options(cls, scene: Scene, n: int, **options) -> float:

@@ -237,15 +237,15 @@ def max_stable_dt(params: Params) -> float:
 
 
 def check_resolution(params: Params, n: int, dt: float, *, allow_underresolved: bool = False,
-                     check_dt: bool = True, spacing: float | None = None):
+                     check_dt: bool = True, spacing: float | None = None, min_n: int = 8):
     """Check the grid size n and the time step dt against the scene (SPEC §4). Raises ModelError.
 
     ``check_dt=False`` skips the Δt < ε³/κ bound (the stabilized scheme has no such bound).
     ``spacing``: the largest node spacing of the discretization (default L/n), which must not
     exceed ε unless ``allow_underresolved``.
     """
-    if not isinstance(n, int) or isinstance(n, bool) or n < 8:
-        raise ModelError(f"n must be an integer >= 8, got {n}")
+    if not isinstance(n, int) or isinstance(n, bool) or n < min_n:
+        raise ModelError(f"n must be an integer >= {min_n}, got {n}")
     if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
         raise ModelError(f"the time step must be positive, got dt = {dt}")
     limit = max_stable_dt(params)

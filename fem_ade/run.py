@@ -46,7 +46,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--recipe", choices=tuple(RECIPES), default="paper",
                    help="what the run is for; sets defaults that the options below override: "
                    + "; ".join(f"{k}: {v}" for k, v in RECIPES.items()))
-    p.add_argument("--n", type=int, help="cells (grid points) per direction (default: the scene's)")
+    p.add_argument("--n", type=int,
+                   help="grid points (spectral) or cells (fem) per direction; the fem has "
+                        "order*n nodes per direction (default: the scene's grid, in nodes: "
+                        "n = scene's n / order cells for the fem)")
     p.add_argument("--dt", type=float, help="time step (default: the paper's, per scene)")
     stop = p.add_mutually_exclusive_group()
     stop.add_argument("--steps", type=int, help="number of steps (default: the scene's, 200)")
@@ -258,7 +261,10 @@ def _main(argv, scratch: str | None = None) -> int:
         if args.volume is not None:
             scene = scene.with_(volume_functional=args.volume)
         options = backend_options(args)
-        if args.n is not None and options.get("mesh") and "." in Path(options["mesh"]).name:
+        if options.get("mesh"):
+            from .fem.mesh import parse_option as parse_mesh_option
+        if args.n is not None and options.get("mesh") and \
+                parse_mesh_option(options["mesh"])[0] == "file":
             raise ModelError("--n does not apply to --mesh FILE: the file sets the resolution")
         if SIZE > 1 and options.get("linalg") != "petsc":
             raise ModelError(f"{SIZE} MPI ranks would each run the whole job: under mpirun "

@@ -128,11 +128,14 @@ def simulate(
     ``force``, the previous run's files in it are removed. ``dry_run``: check, then return a
     one-line description instead of running.
     """
-    n = scene.n if n is None else n
+    options = dict(backend_options or {})
+    if n is None:  # the scene's resolution in nodes per axis: n = scene.n / p cells for the FEM
+        order = options.get("order", 1)
+        n = scene.n if not isinstance(order, int) or order <= 1 else max(
+            3, round(scene.n / order))
     dt = scene.dt if dt is None else dt
     if steps is None and until_steady is None:
         steps = scene.steps
-    options = dict(backend_options or {})
     initial = None
     if phi0 is not None:
         if isinstance(phi0, (str, Path)):
@@ -170,8 +173,10 @@ def simulate(
     be = build_backend(scene, config)  # checks the initial field, writes nothing
     if dry_run:
         info = be.info()
-        return (f"{scene.name} with the {backend} backend ({info.get('element', '')} "
-                f"n = {n}, {scheme} scheme, {constraints} constraints, dt = {dt:g}, "
+        grid = (f"order {info['order']} (GLL), n = {n} cells, {info['order'] * n} nodes per "
+                f"axis, solver {info['solver']}" if "order" in info else f"n = {n}")
+        return (f"{scene.name} with the {backend} backend ({grid}, "
+                f"{scheme} scheme, {constraints} constraints, dt = {dt:g}, "
                 + (f"{steps} steps" if steps is not None else
                    f"until steady (tol {until_steady:g}, at most {max_steps} steps)")
                 + (", momentum" if accelerate else "") + ")"

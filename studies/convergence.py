@@ -61,6 +61,10 @@ METHODS = {
     "p1 graded": ("fem", {"order": 1, "mesh": "graded"}),
     "p4 graded": ("fem", {"order": 4, "mesh": "graded"}),
     "p4 amg": ("fem", {"order": 4, "solver": "amg"}),
+    # graded meshes refined at the box centre, where the paper's vesicles sit (the "graded"
+    # part: where does grading pay?)
+    **{f"p4 centred {g}": ("fem", {"order": 4, "mesh": f"graded:{g}@0.5"})
+       for g in (0.3, 0.5, 0.7)},
 }
 #: the largest node count per axis a discretisation runs at (the iterative path: its cost
 #: is shown, its error is p4's)
@@ -68,7 +72,8 @@ MAX_NODES = {"p4 amg": 64}
 #: one colour per discretisation in every plot
 COLOURS = {"spectral": "#d62728", "p1": "#1f77b4", "p2": "#17becf", "p3": "#9467bd",
            "p4": "#2ca02c", "p6": "#8c564b", "p8": "#e377c2", "p1 graded": "#aec7e8",
-           "p4 graded": "#98df8a", "p4 amg": "#bcbd22"}
+           "p4 graded": "#98df8a", "p4 amg": "#bcbd22", "p4 centred 0.3": "#ffbb78",
+           "p4 centred 0.5": "#ff7f0e", "p4 centred 0.7": "#d62728"}
 
 FULL = {
     "scenes": {
@@ -77,7 +82,15 @@ FULL = {
         "three-arm": {"ref": 192, "start": 50, "steps": 50,
                       "nodes": (48, 64, 72, 80, 96, 128)},
     },
-    "methods": tuple(METHODS),
+    "methods": ("spectral", "p1", "p2", "p3", "p4", "p6", "p8", "p1 graded", "p4 graded",
+                "p4 amg"),
+    "graded": {
+        "scenes": {
+            "discocyte": {"ref": 128, "start": 50, "steps": 50, "nodes": (32, 48, 64, 96)},
+            "chain": {"ref": 192, "start": 50, "steps": 50, "nodes": (48, 64, 96, 128)},
+        },
+        "methods": ("p4", "p4 graded", "p4 centred 0.3", "p4 centred 0.5", "p4 centred 0.7"),
+    },
     "steady": {"scene": "discocyte", "ref": 96, "levels": {"spectral": (32, 48, 64),
                                                            "p1": (32, 48, 64, 96),
                                                            "p4": (24, 32, 48, 64)}},
@@ -89,6 +102,9 @@ QUICK = {
     "scenes": {"ellipse-2d": {"ref": 192, "start": 20, "steps": 20,
                               "nodes": (32, 48, 64, 96)}},
     "methods": ("spectral", "p1", "p2", "p4", "p4 graded", "p4 amg"),
+    "graded": {"scenes": {"ellipse-2d": {"ref": 192, "start": 20, "steps": 20,
+                                         "nodes": (32, 48)}},
+               "methods": ("p4", "p4 centred 0.5")},
     "steady": {"scene": "ellipse-2d", "ref": 96, "levels": {"spectral": (32, 48),
                                                             "p1": (32, 48, 64),
                                                             "p4": (32, 48)}},
@@ -183,6 +199,8 @@ def fit(hs, errs, eps) -> float | None:
 
 
 def spatial(plan: dict, runs: Path) -> dict:
+    """Every discretisation of ``plan["methods"]`` at every level, from both starts, against
+    the spectral reference."""
     from fem_ade.scenes import get_scene
 
     out = {}
@@ -356,7 +374,7 @@ def _strip(obj):
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="seconds (the test suite)")
-    ap.add_argument("--parts", nargs="*", default=["spatial", "steady", "temporal"])
+    ap.add_argument("--parts", nargs="*", default=["spatial", "graded", "steady", "temporal"])
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--runs", default=None,
                     help="where the resolved starts' run folders go (default runs/convergence, "
@@ -385,13 +403,15 @@ def main(argv=None) -> dict:
     path = out / name
     results = json.loads(path.read_text()) if path.is_file() and not quick else {}
     t0 = time.perf_counter()
-    for part, fn in (("spatial", lambda: spatial(plan, runs)), ("steady", lambda: steady(plan)),
-                     ("temporal", lambda: temporal(plan))):
+    for part, fn in (("spatial", lambda: spatial(plan, runs)),
+                     ("graded", lambda: spatial(plan["graded"], runs)),
+                     ("steady", lambda: steady(plan)), ("temporal", lambda: temporal(plan))):
         if part in args.parts:
             print(f"{part}:", flush=True)
             t1 = time.perf_counter()
             new = _strip(fn())
-            results[part] = ({**results.get(part, {}), **new} if part == "spatial" else new)
+            results[part] = ({**results.get(part, {}), **new} if part in ("spatial", "graded")
+                             else new)
             results.setdefault("part_s", {})[part] = time.perf_counter() - t1
             path.write_text(json.dumps(results, indent=1))  # resumable by part
     results.pop("q2", None)  # the earlier study's Q2 diagnosis: see convergence_notes.md
@@ -424,35 +444,9 @@ def report(results: dict, out: Path, quick: bool) -> None:
              "over the levels with node spacing h = L/nodes ≤ ε. `pP` is the FEM of order P "
              "(GLL nodes, exact fast-diagonalization solve); CPU seconds include the set-up.",
              ""]
-    sp = results.get("spatial", {})
-    pngs = []
-    for name, r in sp.items():
-        for start, s in r["starts"].items():
-            what = ("the paper's initial condition" if start == "paper" else
-                    f"the spectral state after {r['start_steps']} steps (resolved start)")
-            lines += [f"## {name} from {what}: {r['steps']} steps of the paper's scheme "
-                      f"against spectral n = {r['ref_n']} (ε = {r['eps']})", "",
-                      f"Reference: E = {s['ref']['E']:.10g} (`{s['ref_command']}`)", ""]
-            if start == "resolved":
-                lines += [f"Start: `{r['start_command']}`", ""]
-            lines += ["| discretisation | n | nodes | h/ε | CPU s | " + " | ".join(
-                f"err {q}" for q in (*QUANTITIES, "phi_L2")) + " |",
-                "|---|---|---|---|---|" + "---|" * (len(QUANTITIES) + 1)]
-            for row in s["rows"]:
-                lines.append(f"| {row['label']} | {row['n']} | {row['nodes']} | "
-                             f"{row['h'] / r['eps']:.2f} | {row['cpu_s']:.2f} | " + " | ".join(
-                                 f"{row['errors'][q]:+.2e}" for q in QUANTITIES) +
-                             f" | {row['errors']['phi_L2']:.2e} |")
-            lines += ["", "Observed rates (h ≤ ε):", "",
-                      "| discretisation | " + " | ".join((*QUANTITIES, "phi_L2")) + " |",
-                      "|---|" + "---|" * (len(QUANTITIES) + 1)]
-            for label, rates in s["rates"].items():
-                lines.append(f"| {label} | " + " | ".join(
-                    _rate(rates[q]) for q in (*QUANTITIES, "phi_L2")) + " |")
-            png = f"convergence-{name}-{start}{suffix}.png"
-            lines += ["", f"![|error in E| against nodes per axis]({png})", ""]
-            _plot(s["rows"], f"{name}, {start} start", out / png)
-            pngs.append(png)
+    for part, title in (("spatial", ""), ("graded", "graded meshes: ")):
+        lines += _spatial_section(results.get(part, {}), title, out, suffix,
+                                  "" if part == "spatial" else "-graded")
     if "steady" in results:
         st = results["steady"]
         lines += [f"## Steady state of {st['scene']} (exact constraints, stabilized 100× Δt, "
@@ -498,6 +492,37 @@ def report(results: dict, out: Path, quick: bool) -> None:
     (out / f"convergence{suffix}.md").write_text("\n".join(lines) + "\n")
 
 
+def _spatial_section(sp: dict, title: str, out: Path, suffix: str, tag: str) -> list[str]:
+    lines = []
+    for name, r in sp.items():
+        for start, s in r["starts"].items():
+            what = ("the paper's initial condition" if start == "paper" else
+                    f"the spectral state after {r['start_steps']} steps (resolved start)")
+            lines += [f"## {title}{name} from {what}: {r['steps']} steps of the paper's scheme "
+                      f"against spectral n = {r['ref_n']} (ε = {r['eps']})", "",
+                      f"Reference: E = {s['ref']['E']:.10g} (`{s['ref_command']}`)", ""]
+            if start == "resolved":
+                lines += [f"Start: `{r['start_command']}`", ""]
+            lines += ["| discretisation | n | nodes | h/ε | CPU s | " + " | ".join(
+                f"err {q}" for q in (*QUANTITIES, "phi_L2")) + " |",
+                "|---|---|---|---|---|" + "---|" * (len(QUANTITIES) + 1)]
+            for row in s["rows"]:
+                lines.append(f"| {row['label']} | {row['n']} | {row['nodes']} | "
+                             f"{row['h'] / r['eps']:.2f} | {row['cpu_s']:.2f} | " + " | ".join(
+                                 f"{row['errors'][q]:+.2e}" for q in QUANTITIES) +
+                             f" | {row['errors']['phi_L2']:.2e} |")
+            lines += ["", "Observed rates (h ≤ ε):", "",
+                      "| discretisation | " + " | ".join((*QUANTITIES, "phi_L2")) + " |",
+                      "|---|" + "---|" * (len(QUANTITIES) + 1)]
+            for label, rates in s["rates"].items():
+                lines.append(f"| {label} | " + " | ".join(
+                    _rate(rates[q]) for q in (*QUANTITIES, "phi_L2")) + " |")
+            png = f"convergence{tag}-{name}-{start}{suffix}.png"
+            lines += ["", f"![|error in E| against nodes per axis]({png})", ""]
+            _plot(s["rows"], f"{title}{name}, {start} start", out / png)
+    return lines
+
+
 def _plot(rows, title, path) -> None:
     from matplotlib.figure import Figure
 
@@ -508,6 +533,9 @@ def _plot(rows, title, path) -> None:
         ax.loglog([r["nodes"] for r in sel], [max(abs(r["errors"]["E"]), 1e-16) for r in sel],
                   "o-" if "graded" not in label else "s--", label=label,
                   color=COLOURS.get(label), lw=1.6, ms=5)
+    ticks = sorted({r["nodes"] for r in rows})
+    ax.set_xticks(ticks, [str(t) for t in ticks])
+    ax.minorticks_off()
     ax.set(xlabel="nodes per axis", ylabel="|relative error in E|", title=title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, ncol=2)

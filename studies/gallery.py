@@ -83,8 +83,12 @@ def plan(scene_names, backends, variants, quick: bool,
                 n = scene.n * (2 if variant == "d" else 1)
                 if quick:
                     n = 12 if scene.params.L == 1.0 else 24
-                kw = {"backend": backend, "n": n, "every": 50,
-                      "backend_options": {"solver": "fft"} if backend == "fem" else {},
+                options = {"solver": "fft"} if backend == "fem" else {}
+                order = fem_order(backend)
+                if order is not None:  # fem-pP: order P on the same nodes (n/P cells)
+                    n, options = max(3, round(n / order)), {"order": order}
+                kw = {"backend": "spectral" if backend == "spectral" else "fem", "n": n,
+                      "every": 50, "backend_options": options,
                       "allow_underresolved": quick, "checkpoint_every": 1000}
                 if variant == "a":
                     steps = 20 if quick else (steps_a or STEPS_A[backend])
@@ -103,6 +107,14 @@ def plan(scene_names, backends, variants, quick: bool,
                 cases.append({"variant": variant, "backend": backend, "scene": name,
                               "kwargs": kw})
     return cases
+
+
+def fem_order(backend: str) -> int | None:
+    """P of a results backend ``fem-pP`` (the FEM of order P on the scene's nodes; ``fem``
+    is the order-1 FEM the table compares), else None."""
+    if backend.startswith("fem-p"):
+        return int(backend[len("fem-p"):])
+    return None
 
 
 def scene_for(case: dict):
@@ -267,6 +279,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--scenes", nargs="*", default=None)
     ap.add_argument("--backend", nargs="*", default=None, choices=BACKENDS,
                     help="default: both (--quick: spectral)")
+    ap.add_argument("--fem-order", type=int, default=None, metavar="P",
+                    help="also run the FEM of order P on the same nodes (results backend "
+                    "fem-pP) and write pairs-fem-pP.md: its ends against the spectral ones")
     ap.add_argument("--variants", nargs="*", default=list(VARIANTS), choices=VARIANTS)
     ap.add_argument("--quick", action="store_true", help="tiny grids and runs (also when CI)")
     ap.add_argument("--report-only", action="store_true")
@@ -288,7 +303,10 @@ def main(argv=None) -> dict:
     root = Path(args.out)
     names = args.scenes or (["discocyte"] if quick else list(PAPER_SCENES))
     backends = args.backend or (["spectral"] if quick else list(BACKENDS))
-    cases = plan(names, backends, args.variants, quick, args.max_steps, args.steps_a)
+    if args.fem_order is not None and not 1 <= args.fem_order <= 16:
+        ap.error(f"--fem-order must be 1 to 16, got {args.fem_order}")
+    extra = [f"fem-p{args.fem_order}"] if args.fem_order else []
+    cases = plan(names, backends + extra, args.variants, quick, args.max_steps, args.steps_a)
     results = {}
     for case in cases:
         key = (case["variant"], case["backend"], case["scene"])
@@ -304,7 +322,46 @@ def main(argv=None) -> dict:
                   "from its checkpoint next time", flush=True)
             raise SystemExit(130) from None
     report = write_report(root, names, backends, args.variants, quick=quick)
+    if extra:
+        report["pairs"] = write_pairs(root, extra[0])
     return {"results": results, "report": report}
+
+
+def write_pairs(root: Path, backend: str) -> dict:
+    """``pairs-BACKEND.md``: every case run on both the spectral backend and ``backend``
+    (``fem-pP``): the two ends' labels, pieces, genus and energies."""
+    from fem_ade.scenes import PAPER_SCENES
+
+    rows, same, close = [], 0, 0
+    for v in VARIANTS:
+        for name in PAPER_SCENES:
+            a, b = _load(root, v, "spectral", name), _load(root, v, backend, name)
+            if a is None or b is None or not a.get("shape") or not b.get("shape"):
+                continue
+            Ea, Eb = a["final"]["E"], b["final"]["E"]
+            rel = abs(Eb - Ea) / abs(Ea)
+            sa, sb = a["shape"], b["shape"]
+            label = (sa["label"], sa["components"]) == (sb["label"], sb["components"])
+            same += label
+            close += rel <= 1e-3
+            rows.append({"variant": v, "scene": name, "spectral": sa["label"],
+                         "fem": sb["label"], "pieces": (sa["components"], sb["components"]),
+                         "status": (a["status"], b["status"]), "E": (Ea, Eb), "rel": rel,
+                         "same_label": label})
+    lines = [f"# The gallery on {backend} against the spectral backend", "",
+             f"Written by `studies/gallery.py --fem-order {fem_order(backend)}`: every case "
+             f"run on both, the FEM of order {fem_order(backend)} on the scene's nodes (n/"
+             f"{fem_order(backend)} cells per axis). {len(rows)} pairs, {same} with the same "
+             f"label and number of pieces, {close} with energies within 1e-3.", "",
+             "| variant | scene | spectral | " + backend + " | pieces | status | E spectral | "
+             "E " + backend + " | rel. diff |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['variant']} | {r['scene']} | {r['spectral']} | {r['fem']} | "
+                     f"{r['pieces'][0]} / {r['pieces'][1]} | {r['status'][0]} / "
+                     f"{r['status'][1]} | {r['E'][0]:.8g} | {r['E'][1]:.8g} | "
+                     f"{r['rel']:.1e} |")
+    (root / f"pairs-{backend}.md").write_text("\n".join(lines) + "\n")
+    return {"pairs": len(rows), "same_label": same, "within_1e-3": close, "rows": rows}
 
 
 # ---------------------------------------------------------------------------------------

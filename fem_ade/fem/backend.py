@@ -105,6 +105,13 @@ class FEMBackend(BackendBase):
         return per * (1.0 + 0.2 * (order > 1 and assembled)) * nodes
 
     @classmethod
+    def min_cells(cls, *, order: int = 1, **options) -> int:
+        """At least 3 cells per axis (a periodic mesh) and 8 nodes (p·n ≥ 8)."""
+        if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 1:
+            return 8
+        return max(fmesh.MIN_CELLS, -(-8 // int(order)))
+
+    @classmethod
     def check_options(cls, scene: Scene, n: int, *, order: int = 1, mesh=None,
                       solver: str = "auto", linalg: str = "numpy", rtol=None) -> float:
         """Order, solver, mesh, linear algebra and tolerance; the node spacing h_max/p (of a

@@ -112,10 +112,14 @@ def graded_axis(n: int, L: float, grading: float, shift: float = 0.0) -> np.ndar
     return L * x
 
 
-def graded(dim: int, n: int, L: float = 1.0, grading: float = 0.3) -> PeriodicMesh:
-    """A tensor mesh with n cells per direction, refined smoothly (a different phase per axis)."""
+def graded(dim: int, n: int, L: float = 1.0, grading: float = 0.3,
+           centre: float | None = None) -> PeriodicMesh:
+    """A tensor mesh with n cells per direction, refined smoothly: finest at x = centre·L on
+    every axis, or (``centre`` None) at a different phase per axis (0, 0.13, 0.26 of L: a
+    mesh with no symmetry, for testing)."""
     _check_cells(n)
-    axes = tuple(graded_axis(n, L, grading, shift=0.13 * k) for k in range(dim))
+    shifts = [0.13 * k for k in range(dim)] if centre is None else [centre] * dim
+    axes = tuple(graded_axis(n, L, grading, shift=shift) for shift in shifts)
     return PeriodicMesh("graded", dim, float(L), axes=axes)
 
 
@@ -249,21 +253,29 @@ DEFAULT_GRADING = 0.3
 
 
 def parse_option(mesh) -> tuple[str, object]:
-    """The ``mesh`` option as (kind, value): ("uniform", None), ("graded", g), ("file", path)
-    or ("given", PeriodicMesh). Raises ModelError for a malformed grading."""
+    """The ``mesh`` option as (kind, value): ("uniform", None), ("graded", (g, centre)),
+    ("file", path) or ("given", PeriodicMesh). ``graded[:g][@c]``: grading g in [0, 1)
+    (default 0.3), finest at c·L on every axis (c in [0, 1); default: a different phase per
+    axis). Raises ModelError for a malformed grading."""
     if isinstance(mesh, PeriodicMesh):
         return "given", mesh
     if mesh is None or mesh == "uniform":
         return "uniform", None
-    if isinstance(mesh, str) and (mesh == "graded" or mesh.startswith("graded:")):
-        text = mesh.partition(":")[2]
+    if isinstance(mesh, str) and (mesh == "graded" or mesh.startswith(("graded:", "graded@"))):
+        body, _, where = mesh[len("graded"):].partition("@")
+        text = body[1:] if body.startswith(":") else body
         try:
             g = float(text) if text else DEFAULT_GRADING
+            centre = float(where) if where else None
         except ValueError:
-            raise ModelError(f"--mesh graded:g needs a number g in [0, 1), got {text!r}") from None
-        if not 0.0 <= g < 1.0:
-            raise ModelError(f"--mesh graded:g needs 0 <= g < 1, got {g}")
-        return "graded", g
+            raise ModelError(f"--mesh graded[:g][@c] needs numbers g in (0, 1) and c in "
+                             f"[0, 1), got {mesh!r}") from None
+        if not 0.0 < g < 1.0:
+            raise ModelError(f"--mesh graded:g needs 0 < g < 1 (g = 0 is the uniform mesh), "
+                             f"got {g}")
+        if centre is not None and not 0.0 <= centre < 1.0:
+            raise ModelError(f"--mesh graded@c needs 0 <= c < 1 (a fraction of L), got {centre}")
+        return "graded", (g, centre)
     return "file", Path(mesh)
 
 
@@ -277,5 +289,5 @@ def make(dim: int, n: int, L: float, mesh=None) -> PeriodicMesh:
     if kind == "uniform":
         return uniform(dim, n, L)
     if kind == "graded":
-        return graded(dim, n, L, value)
+        return graded(dim, n, L, *value)
     return from_file(value, dim, L)
