@@ -166,6 +166,11 @@ class BackendBase:
     bytes_per_dof = 400.0
 
     @classmethod
+    def default_n(cls, scene: Scene, **options) -> int:
+        """The n of a run that gives none: the scene's grid."""
+        return scene.n
+
+    @classmethod
     def min_cells(cls, **options) -> int:
         """The smallest n a run takes (a grid of 8 points per axis)."""
         return 8

@@ -528,7 +528,11 @@ def run_label(summary: dict, n_grid: int) -> str:
     status = summary.get("status")
     flag = "DIVERGED: last finite state" if status == "diverged" else (
         "interrupted" if status == "interrupted" else "")
-    head = f"{summary.get('scene', '')} [{summary.get('backend', '')}, n = {n_grid}]"
+    info = summary.get("backend_info") or {}
+    order = info.get("order")
+    grid = (f"p = {order}, {n_grid} nodes per axis" if order and summary.get("backend") == "fem"
+            else f"n = {n_grid}")
+    head = f"{summary.get('scene', '')} [{summary.get('backend', '')}, {grid}]"
     return " — ".join(s for s in (head, when, flag) if s)
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .backend import Backend, check_backend, make_backend
+from .backend import Backend, backend_class, check_backend, make_backend
 from .initial import FieldIC, check_grid_field
 from .loop import AdaptiveDt, LoopState, RunResult, run_loop
 from .model import HISTORY_COLUMNS, ModelError, max_stable_dt
@@ -129,10 +129,8 @@ def simulate(
     one-line description instead of running.
     """
     options = dict(backend_options or {})
-    if n is None:  # the scene's resolution in nodes per axis: n = scene.n / p cells for the FEM
-        order = options.get("order", 1)
-        n = scene.n if not isinstance(order, int) or order <= 1 else max(
-            3, round(scene.n / order))
+    if n is None:  # the scene's resolution, as the backend counts it
+        n = backend_class(backend).default_n(scene, **options)
     dt = scene.dt if dt is None else dt
     if steps is None and until_steady is None:
         steps = scene.steps
@@ -173,8 +171,7 @@ def simulate(
     be = build_backend(scene, config)  # checks the initial field, writes nothing
     if dry_run:
         info = be.info()
-        grid = (f"order {info['order']} (GLL), n = {n} cells, {info['order'] * n} nodes per "
-                f"axis, solver {info['solver']}" if "order" in info else f"n = {n}")
+        grid = info.get("resolution", f"n = {n}")
         return (f"{scene.name} with the {backend} backend ({grid}, "
                 f"{scheme} scheme, {constraints} constraints, dt = {dt:g}, "
                 + (f"{steps} steps" if steps is not None else

@@ -189,7 +189,7 @@ def check_scaling(result, out):
     assert "| 256³ |" in (out / "scaling.md").read_text()
 
 
-ARGS = {"readme_figure": ["--steps", "2", "--n", "26"]}
+ARGS = {"readme_figure": ["--steps", "2", "--n", "6"]}
 
 
 @pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW

@@ -10,6 +10,7 @@ schemes); the linear solve is :mod:`.solve`.
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -88,11 +89,14 @@ class FEMBackend(BackendBase):
         if dt is not None:
             self.set_dt(dt)
 
-    #: memory per unknown of a tensor space (matrix-free: the state, the step's dozen work
-    #: vectors and a batched solve of up to six right sides; measured 0.36 GB peak for a
-    #: 64³-node run at p = 4, 1.4 kB per unknown, with margin), and of an assembled one
-    #: (a file mesh's matrices and AMG hierarchy: 2.7 kB per unknown measured for Q1)
-    bytes_per_dof = 2000.0
+    #: memory per unknown (bytes, with margin) of a tensor space solved exactly — matrix-free:
+    #: the state, the step's work vectors, a batched solve of up to six right sides
+    #: (measured: 358 MB peak at 128³ nodes, p = 1, 4 or 8, 105 MB at 64³: 137 B per unknown
+    #: over a 70 MB baseline) — of a tensor space with PCG + AMG (the assembled low-order
+    #: refined matrix and its hierarchy: 1.6 GB at 128³, 760 B per unknown), and of a mesh
+    #: file (scikit-fem's matrices and AMG: 2.7 kB per unknown measured for Q1)
+    bytes_per_dof = 400.0
+    bytes_per_krylov_dof = 1500.0
     bytes_per_assembled_dof = 4000.0
 
     @classmethod
@@ -100,9 +104,17 @@ class FEMBackend(BackendBase):
                      solver: str = "auto", linalg: str = "numpy", rtol=None) -> float:
         nodes = float(order * n) ** scene.dim
         kind, _ = fmesh.parse_option(mesh)
-        assembled = kind not in ("uniform", "graded") or solver not in ("auto", *EXACT)
-        per = cls.bytes_per_assembled_dof if assembled else cls.bytes_per_dof
-        return per * (1.0 + 0.2 * (order > 1 and assembled)) * nodes
+        if kind not in ("uniform", "graded"):
+            return cls.bytes_per_assembled_dof * (1.2 if order > 1 else 1.0) * nodes
+        exact = solver in ("auto", *EXACT) and linalg != "petsc"
+        return (cls.bytes_per_dof if exact else cls.bytes_per_krylov_dof) * nodes
+
+    @classmethod
+    def default_n(cls, scene: Scene, *, order: int = 1, **options) -> int:
+        """The scene's grid in nodes per axis: n = scene's n / p cells (at least 3)."""
+        if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order <= 1:
+            return scene.n
+        return max(fmesh.MIN_CELLS, round(scene.n / int(order)))
 
     @classmethod
     def min_cells(cls, *, order: int = 1, **options) -> int:
@@ -241,7 +253,14 @@ class FEMBackend(BackendBase):
     def info(self) -> dict:
         solver = self.stepper.solver
         kind = solver.kind if solver is not None else self.stepper.solver_kind
+        basis = self.stepper.eigenbasis
+        if solver is None and basis is not None:  # before the first Δt: what auto will take
+            kind = "fft" if basis.fourier else "fdm"
+        grid = (f"n = {self.n} cells, {self.order * self.n} nodes per axis"
+                if self.mesh.is_tensor else
+                f"mesh file {Path(self.mesh.source).name}, {self.space.n_dofs} nodes")
         return {
+            "resolution": f"order {self.order} (GLL), {grid}, solver {kind}",
             "backend": self.name,
             "order": self.order,
             "element": f"Q{self.order} (GLL)",
