@@ -249,6 +249,9 @@ def check_resolution(params: Params, n: int, dt: float, *, allow_underresolved: 
     if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
         raise ModelError(f"the time step must be positive, got dt = {dt}")
     limit = max_stable_dt(params)
+    if dt < 1e-12 * limit:
+        raise ModelError(f"dt = {dt:g} is too small to move the field (below 1e-12 eps^3/kappa "
+                         f"= {1e-12 * limit:g})")
     if check_dt and dt >= limit:
         raise ModelError(
             f"dt = {dt:g} >= eps^3/kappa = {limit:g}: the semi-implicit step operator is singular "

@@ -24,7 +24,15 @@ PACKAGES = ("fem_ade", "numpy", "scipy", "scikit-fem", "pyamg", "meshio", "pyvis
 #: the files a run writes into its folder (``--force`` removes these, and nothing else)
 RUN_FILES = ("run.json", "history.csv", "summary.json", "final.npz", "checkpoint.npz",
              "phi.xdmf", "phi.h5", "shape.png", "history.png", "shapes.csv", "initial.npz")
-RUN_GLOBS = ("phi-from-*.xdmf", "phi-from-*.h5", "*.tmp", "*.tmp.npz", "*.tmp.png")
+RUN_GLOBS = ("phi-[0-9]*.h5", "phi-from-*.xdmf", "phi-from-*.h5", "*.tmp", "*.tmp.npz",
+             "*.tmp.png", "*.tmp.h5")
+
+
+def series_files(folder: Path) -> list[Path]:
+    """The files of a run's ParaView series in ``folder`` (its index, mesh and steps)."""
+    folder = Path(folder)
+    found = [folder / n for n in ("phi.xdmf", "phi.h5") if (folder / n).exists()]
+    return found + sorted(folder.glob("phi-[0-9]*.h5")) + sorted(folder.glob("phi-from-*"))
 
 
 def run_files(folder: Path) -> list[Path]:
@@ -35,6 +43,32 @@ def run_files(folder: Path) -> list[Path]:
     return found
 
 
+def contents(path: Path) -> list[Path]:
+    """What a folder holds, without the lock and owner files of :mod:`fem_ade.lock`."""
+    from .lock import HIDDEN
+
+    return [p for p in Path(path).iterdir() if p.name not in HIDDEN]
+
+
+def check_path_name(path: Path, what: str = "--out") -> None:
+    """ModelError for a path no file system here takes: a name longer than NAME_MAX, a path
+    longer than PATH_MAX, a NUL byte."""
+    text = str(path)
+    if "\0" in text:
+        raise ModelError(f"{what}: the path contains a NUL byte")
+    try:
+        name_max = os.pathconf(".", "PC_NAME_MAX")
+        path_max = os.pathconf(".", "PC_PATH_MAX")
+    except (OSError, ValueError, AttributeError):
+        name_max, path_max = 255, 4096
+    long = [part for part in Path(path).parts if len(os.fsencode(part)) > name_max]
+    if long:
+        raise ModelError(f"{what}: a folder name of {len(os.fsencode(long[0]))} bytes is longer "
+                         f"than this file system takes ({name_max})")
+    if len(os.fsencode(os.path.abspath(text))) >= path_max:
+        raise ModelError(f"{what}: the path is longer than this system takes ({path_max} bytes)")
+
+
 def check_out_dir(path: str | Path, *, force: bool = False) -> Path:
     """Check that ``path`` can take a run, creating and changing nothing (ModelError): an
     existing folder must be empty (or, with ``force``, hold a run whose files are files), a
@@ -43,10 +77,11 @@ def check_out_dir(path: str | Path, *, force: bool = False) -> Path:
     if not text.strip():
         raise ModelError("--out needs a folder name")
     path = Path(path)
+    check_path_name(path)
     if path.exists() and not path.is_dir():
         raise ModelError(f"--out {path} exists and is not a folder")
     if path.is_dir():
-        if any(path.iterdir()) and not force:
+        if contents(path) and not force:
             raise ModelError(
                 f"output folder {path} exists and is not empty; use --force or another --out")
         odd = [p.name for p in run_files(path) if not p.is_file()]
@@ -66,10 +101,15 @@ def check_out_dir(path: str | Path, *, force: bool = False) -> Path:
     return path
 
 
-def prepare_out_dir(path: Path, *, force: bool = False, fresh: bool = False) -> None:
+def prepare_out_dir(path: Path, *, force: bool = False, fresh: bool = False):
     """Create the run folder (``fresh``: it must not exist yet: a default folder is never
-    shared) and prove it writable; with ``force``, remove the previous run's files (and
-    nothing else). ModelError, with anything created here removed again, if that fails."""
+    shared), prove it writable and take its lock (:class:`fem_ade.lock.FolderLock`, returned:
+    the caller holds it for the whole run); under the lock, check again that it is empty
+    (another process may have written there since :func:`check_out_dir`) or, with
+    ``force``, remove the previous run's files (and nothing else). ModelError — FolderBusy
+    when another run holds it — with anything created here removed again, if that fails."""
+    from .lock import FolderLock
+
     created = []
     try:
         for folder in reversed([path, *path.parents]):
@@ -88,9 +128,33 @@ def prepare_out_dir(path: Path, *, force: bool = False, fresh: bool = False) -> 
             except OSError:
                 pass
         raise ModelError(f"--out {path}: cannot write there ({err.strerror or err})") from None
-    if force:
-        for p in run_files(path):
-            p.unlink()
+    lock = FolderLock(path)
+    try:
+        lock.acquire()
+    except ModelError:
+        for folder in reversed(created):
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
+        raise
+    try:
+        if force:
+            odd = [p.name for p in run_files(path) if not p.is_file()]
+            if odd:
+                raise ModelError(f"--out {path}: {', '.join(odd)} should be files of a run but "
+                                 "are not; remove them first")
+            for p in run_files(path):
+                p.unlink()
+        elif contents(path):
+            raise ModelError(f"output folder {path} is not empty any more (another process "
+                             "wrote there); use --force or another --out")
+    except (ModelError, OSError) as err:
+        lock.release()
+        if isinstance(err, OSError):
+            raise ModelError(f"--out {path}: cannot clean it ({err.strerror or err})") from None
+        raise
+    return lock
 
 
 def package_versions() -> dict:
@@ -104,7 +168,8 @@ def package_versions() -> dict:
 
 
 class HistoryWriter:
-    """history.csv: one row per recorded step, flushed at once so nothing is lost on failure."""
+    """history.csv: one row per recorded step, flushed at once so nothing is lost on failure,
+    each row written whole (a signal waits for it: :func:`fem_ade.interrupt.critical`)."""
 
     def __init__(self, path: str | Path, columns: tuple[str, ...], *, append: bool = False):
         self.columns = columns
@@ -115,6 +180,8 @@ class HistoryWriter:
         self._file.flush()
 
     def write(self, row: dict) -> None:
+        from .interrupt import critical
+
         out = []
         for c in self.columns:
             v = row.get(c, 0)
@@ -122,8 +189,9 @@ class HistoryWriter:
                 out.append(repr(float(v)))
             else:
                 out.append(str(v))
-        self._csv.writerow(out)
-        self._file.flush()
+        with critical():
+            self._csv.writerow(out)
+            self._file.flush()
 
     def close(self) -> None:
         self._file.close()
@@ -169,13 +237,54 @@ def read_history(path: str | Path) -> dict[str, np.ndarray]:
     return {c: np.array([float(r[i]) for r in body]) for i, c in enumerate(header)}
 
 
+def _step_of(row: list[str], width: int) -> int | None:
+    """The step of a CSV row that is whole (``width`` cells, an integer first), else None."""
+    if len(row) != width:
+        return None
+    try:
+        return int(row[0])
+    except ValueError:
+        return None
+
+
+def check_history(path: str | Path, last_step: int) -> None:
+    """ModelError unless ``path`` is a run's history.csv that a resume from ``last_step`` can
+    continue: readable, with its header, its rows whole up to that step (a last row cut short
+    by a crash is dropped by :func:`truncate_csv`)."""
+    from .model import HISTORY_COLUMNS
+
+    path = Path(path)
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.reader(f))
+    except FileNotFoundError:
+        raise ModelError(f"cannot resume {path.parent}: its history.csv is missing") from None
+    except (OSError, UnicodeDecodeError, csv.Error) as err:
+        raise ModelError(f"cannot resume {path.parent}: history.csv is unreadable "
+                         f"({err})") from None
+    if not rows or tuple(rows[0][:len(HISTORY_COLUMNS)]) != HISTORY_COLUMNS:
+        raise ModelError(f"cannot resume {path.parent}: history.csv has no header "
+                         f"{','.join(HISTORY_COLUMNS)}")
+    width = len(rows[0])
+    for i, row in enumerate(rows[1:], start=2):
+        step = _step_of(row, width)
+        if step is None and i < len(rows):  # only the last row may be cut short
+            raise ModelError(f"cannot resume {path.parent}: history.csv line {i} is not a "
+                             "row of the run")
+        if step is not None and step > last_step:
+            break
+
+
 def truncate_csv(path: str | Path, last_step: int) -> list[dict[str, str]]:
-    """Drop the rows of a per-step CSV file (first column: step) after ``last_step``, before
-    a resumed run appends to it; return the rows kept, as dicts of strings."""
+    """Drop the rows of a per-step CSV file (first column: step) after ``last_step``, and a
+    last row cut short by a crash, before a resumed run appends to it (atomically); return
+    the rows kept, as dicts of strings."""
     path = Path(path)
     with open(path, newline="") as f:
         rows = list(csv.reader(f))
-    keep = rows[:1] + [r for r in rows[1:] if int(r[0]) <= last_step]
+    width = len(rows[0])
+    keep = rows[:1] + [r for r in rows[1:] if (k := _step_of(r, width)) is not None
+                       and k <= last_step]
     tmp = path.with_suffix(".csv.tmp")
     with open(tmp, "w", newline="") as f:
         csv.writer(f).writerows(keep)

@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
 from pathlib import Path
 
 from .registry import BACKENDS, CONSTRAINTS, IC_VARIANTS, RECIPES, SCHEMES, VOLUMES
 
-EXIT_BAD_INPUT, EXIT_INTERRUPTED = 2, 130
+EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED = 2, 3, 130
 #: the options --resume takes; every other one is stored in the run folder
 RESUME_OPTIONS = {"resume", "steps", "quiet"}
 
@@ -146,7 +145,12 @@ def world() -> tuple[int, int]:
     for rank, size in (("OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_SIZE"),
                        ("PMI_RANK", "PMI_SIZE"), ("PMIX_RANK", "PMI_SIZE")):
         if rank in os.environ and size in os.environ:
-            return int(os.environ[rank]), int(os.environ[size])
+            try:
+                r, p = int(os.environ[rank]), int(os.environ[size])
+            except ValueError:
+                continue  # not a launcher's: a malformed variable is no MPI job
+            if p >= 1 and 0 <= r < p:
+                return r, p
     return 0, 1
 
 
@@ -159,12 +163,24 @@ def _error(message: str) -> int:
     return EXIT_BAD_INPUT
 
 
+def _failed(message: str) -> int:
+    """A run that could not write its folder mid-way: one line, exit 3."""
+    if RANK == 0:
+        print(f"fem_ade.run: error: {message}", file=sys.stderr)
+    return EXIT_FAILED
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; under ``mpirun -n P`` (``--linalg petsc``) every rank runs it,
     rank 0 writes the run folder and prints, the others work in a private temporary folder
     (removed at the end), and a failure on any rank ends all of them (MPI_Abort) with its
     exit code."""
-    signal.signal(signal.SIGTERM, _interrupt)
+    from .interrupt import install
+
+    install()  # SIGINT too: a shell that starts us in the background has it ignored
+    for stream in (sys.stdout, sys.stderr):  # a folder's name must never cost a traceback
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
     scratch = None
     if RANK > 0:
         import tempfile
@@ -216,7 +232,7 @@ def _main(argv, scratch: str | None = None) -> int:
         print(list_scenes())
         return 0
     from .model import ModelError
-    from .runs import default_out, resume, simulate
+    from .runs import WriteFailed, default_out, resume, simulate
 
     given = given_options(sys.argv[1:] if argv is None else argv, parser)
     if args.resume is not None:
@@ -238,6 +254,8 @@ def _main(argv, scratch: str | None = None) -> int:
                                            with_config=True)
         except ModelError as err:
             return _error(str(err))
+        except WriteFailed as err:
+            return _failed(str(err))
         return _report(scene, config["backend"], result, args.resume)
     if args.scene is None:
         from .scenes import SCENES
@@ -287,6 +305,8 @@ def _main(argv, scratch: str | None = None) -> int:
         )
     except ModelError as err:
         return _error(str(err))
+    except WriteFailed as err:
+        return _failed(str(err))
     if args.dry_run:
         print(f"fem_ade.run: would run {result}")
         return 0
@@ -310,16 +330,17 @@ def backend_options(args) -> dict:
     return options
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
 def _report(scene, backend: str, result, out) -> int:
     from .runs import verdict
 
     f, p = result.final, scene.params
-    stream = sys.stderr if result.exit_code else sys.stdout
-    print(f"{scene.name} [{backend}]: {result.message}", file=stream)
+    line = f"{scene.name} [{backend}]: {result.message}"
+    if result.status == "interrupted":
+        line += f"; continue with: python -m fem_ade.run --resume {out} [--steps N]"
+    if result.exit_code:  # one line on stderr: what happened; the details on stdout
+        print(f"fem_ade.run: {line}", file=sys.stderr)
+    else:
+        print(line)
     print(f"  t = {result.t:.4g}  E = {f['E']:.6g}  W = {f['W']:.6g}  G = {f['G']:.4g}  "
           f"V/alpha = {f['V'] / p.alpha:.4f}  A/beta = {f['A'] / p.beta:.4f}  "
           f"dA = {f['dA']:.4g}  ({result.wall_s:.1f} s)")
@@ -333,11 +354,25 @@ def _report(scene, backend: str, result, out) -> int:
         v = verdict(scene, d)
         if v is not None:
             print(f"  {v['line']}")
-    written = sorted(p.name for p in Path(out).iterdir()) if Path(out).is_dir() else []
-    print(f"  results in {out}/ ({', '.join(written)})")
-    if result.status == "interrupted":
-        print(f"  to continue: python -m fem_ade.run --resume {out} [--steps N]", file=stream)
+    print(f"  results in {out}/ ({', '.join(_listing(Path(out)))})")
     return result.exit_code
+
+
+def _listing(out: Path) -> list[str]:
+    """A run folder's files for the last line: the series' step files counted, not named,
+    the lock and owner files left out."""
+    import re
+
+    from .lock import HIDDEN
+
+    if not out.is_dir():
+        return []
+    names = sorted(p.name for p in out.iterdir() if p.name not in HIDDEN)
+    steps = [n for n in names if re.fullmatch(r"phi-\d{8}\.h5", n)]
+    shown = [n for n in names if n not in steps]
+    if steps:
+        shown.append(f"{len(steps)} step file{'s' if len(steps) != 1 else ''} phi-K.h5")
+    return shown
 
 
 if __name__ == "__main__":

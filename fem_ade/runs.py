@@ -6,7 +6,8 @@ checkpoint. Nothing here knows which backend it runs: backend-specific options a
 the backend's own :meth:`~fem_ade.backend.Backend.check` and passed through unread.
 
 A run folder holds ``run.json`` (what :func:`resume` needs), ``history.csv`` (written row by
-row), ``summary.json``, ``final.npz``, the ParaView series ``phi.xdmf`` (+ ``.h5``), with
+row), ``summary.json``, ``final.npz``, the ParaView series ``phi.xdmf`` (the mesh in
+``phi.h5``, each saved step in ``phi-KKKKKKKK.h5``), with
 ``checkpoint_every`` a ``checkpoint.npz``, with ``phi0`` given as an array ``initial.npz``, and
 unless ``render=False`` the pictures ``shape.png`` and ``history.png``. The shape descriptors
 and the pictures are computed once, from the fields in memory.
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 import warnings
 from dataclasses import asdict
@@ -29,6 +31,7 @@ from .loop import AdaptiveDt, LoopState, RunResult, run_loop
 from .model import HISTORY_COLUMNS, ModelError, max_stable_dt
 from .output import (
     HistoryWriter,
+    check_history,
     check_out_dir,
     package_versions,
     prepare_out_dir,
@@ -128,6 +131,18 @@ def simulate(
     ``force``, the previous run's files in it are removed. ``dry_run``: check, then return a
     one-line description instead of running.
     """
+    scene = _scene_argument(scene)
+    if backend_options is not None and not isinstance(backend_options, dict):
+        raise TypeError(f"backend_options must be a dict, got {type(backend_options).__name__}")
+    if monitor is not None and not callable(monitor):
+        raise TypeError(f"monitor must be callable (backend, row), got "
+                        f"{type(monitor).__name__}")
+    for name, value in (("dt", dt), ("until_steady", until_steady)):
+        if value is not None and (isinstance(value, bool) or not isinstance(
+                value, (int, float, np.integer, np.floating))):
+            raise ModelError(f"{name} must be a number, got {value!r}")
+    if not _real(perturb):  # None included: perturb has no "not given"
+        raise ModelError(f"perturb must be a number >= 0, got {perturb!r}")
     options = dict(backend_options or {})
     if n is None:  # the scene's resolution, as the backend counts it
         n = backend_class(backend).default_n(scene, **options)
@@ -138,7 +153,11 @@ def simulate(
     if phi0 is not None:
         if isinstance(phi0, (str, Path)):
             scene = scene.with_(ic=FieldIC(path=str(Path(phi0).resolve())))
+            scene.ic.check(scene.dim)
+            initial = scene.ic.values()  # kept with the run: it resumes if phi0 moves
         else:
+            if np.iscomplexobj(phi0):
+                raise ModelError("phi0 must be a real field, got complex values")
             initial = check_grid_field(phi0, "phi0")
             scene = scene.with_(ic=FieldIC(grid=initial))
         scene.ic.check(scene.dim)
@@ -178,14 +197,36 @@ def simulate(
                    f"until steady (tol {until_steady:g}, at most {max_steps} steps)")
                 + (", momentum" if accelerate else "") + ")"
                 + (f" into {out}" if out is not None else ""))
-    if out is not None:
-        prepare_out_dir(out, force=force, fresh=fresh)
-        if initial is not None:  # an array start is kept with the run
+    if out is None:
+        return _execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)
+    lock = prepare_out_dir(out, force=force, fresh=fresh)  # ours until the run ends
+    try:
+        if initial is not None:  # the start field is kept with the run
             write_fields(out / "initial.npz", {"phi": initial})
             scene = scene.with_(ic=FieldIC(path=str((out / "initial.npz").resolve()),
                                            grid=initial))
         config["scene"] = scene_to_mapping(scene)
-    return _execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)
+        return _execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)
+    finally:
+        lock.release()
+
+
+def _real(value) -> bool:
+    """A real, finite number (not a bool)."""
+    return (isinstance(value, (int, float, np.integer, np.floating))
+            and not isinstance(value, bool) and math.isfinite(float(value)))
+
+
+def _scene_argument(scene) -> Scene:
+    """``scene`` of the Python API: a Scene, or the name of a catalogue scene or a TOML file
+    (as on the command line); TypeError for anything else."""
+    if isinstance(scene, Scene):
+        return scene
+    if isinstance(scene, (str, Path)):
+        from .scenes import resolve_scene
+
+        return resolve_scene(str(scene))
+    raise TypeError(f"scene must be a Scene or a scene name, got {type(scene).__name__}")
 
 
 def build_backend(scene: Scene, config: dict, state: dict | None = None) -> Backend:
@@ -205,6 +246,10 @@ def build_backend(scene: Scene, config: dict, state: dict | None = None) -> Back
         raise ModelError(f"the initial field has no inside (phi > 0 at fewer than "
                          f"{2**scene.dim} nodes): the scene's shape is smaller than the grid "
                          f"resolves, or does not fit its box (L = {scene.params.L})")
+    if state is None and np.count_nonzero(phi < 0) < 2**scene.dim:
+        raise ModelError(f"the initial field has no outside (phi < 0 at fewer than "
+                         f"{2**scene.dim} nodes): the scene's shape covers its whole box "
+                         f"(L = {scene.params.L}), so there is no membrane")
     return be
 
 
@@ -222,7 +267,7 @@ def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_ever
     """The loop's numbers, before anything is written (ModelError, one line)."""
     if (steps is None) == (until_steady is None):
         raise ModelError("give exactly one of steps and until_steady")
-    for name, value, low in (("steps", steps, 0), ("max-steps", max_steps, 1),
+    for name, value, low in (("steps", steps, 1), ("max-steps", max_steps, 1),
                              ("every", every, 1), ("checkpoint-every", checkpoint_every, 1),
                              ("save-every", save_every, 1), ("shape-every", shape_every, 1)):
         if value is None:
@@ -238,23 +283,79 @@ def resume(out: str | Path, *, steps: int | None = None, quiet: bool = True,
            with_config: bool = False):
     """Continue the run in ``out`` from its checkpoint up to step ``steps`` (default: as before).
 
-    The continued run is bit for bit the uninterrupted one. The run folder and its
-    checkpoint are checked first (ModelError, nothing changed): readable, complete, finite,
-    and the checkpoint of this very run (its scene, backend, resolution, options, scheme,
-    constraints and parameters). ``with_config``: return (result, scene, config).
+    The continued run is bit for bit the uninterrupted one. The folder is locked first
+    (:class:`fem_ade.lock.FolderBusy` if another process holds it), then everything read is
+    checked before anything is written (ModelError, nothing changed): run.json with the
+    checks of a new run (scene, backend and its options, the loop's numbers), the checkpoint
+    (readable, complete, finite, its step within the run, of this very run: scene, backend,
+    resolution, options, scheme, constraints and parameters) and history.csv.
+    ``with_config``: return (result, scene, config).
     """
+    from .lock import FolderLock
+
     out = Path(out)
     if not (out / "run.json").is_file() or not (out / "checkpoint.npz").is_file():
         raise ModelError(f"cannot resume {out}: it has no run.json and checkpoint.npz "
                          "(run with --checkpoint-every K, or interrupt with Ctrl-C)")
+    lock = FolderLock(out).acquire()
+    try:
+        scene, config, state, ls = _check_resumable(out, steps)
+        try:
+            be = build_backend(scene, config, state)
+        except (ValueError, TypeError, KeyError) as err:  # ModelError is a ValueError too
+            if isinstance(err, ModelError):
+                raise ModelError(f"cannot resume {out}: {err}") from None
+            raise ModelError(f"cannot resume {out}: the checkpoint's state does not fit this "
+                             f"run ({type(err).__name__}: {err})") from None
+        result = _execute(out, scene, config, quiet=quiet, start=(state, ls), be=be)
+    finally:
+        lock.release()
+    return (result, scene, config) if with_config else result
+
+
+#: run.json's keys and what each must be
+_CONFIG_KEYS = ("scene", "backend", "n", "dt", "steps", "until_steady", "max_steps", "every",
+                "ic", "perturb", "seed", "scheme", "constraints", "adaptive", "accelerate",
+                "checkpoint_every", "save_every", "shape_every", "render", "backend_options")
+
+
+def _check_resumable(out: Path, steps: int | None):
+    """(scene, config, state, loop state) of a run folder to resume, every piece checked as
+    a new run's would be; ModelError (one line) for the first that is not right."""
     try:
         config = read_json(out / "run.json")
+        missing = [k for k in _CONFIG_KEYS if k not in config]
+        if missing:
+            raise KeyError(", ".join(missing))
         scene = scene_from_mapping(config["scene"], where=str(out / "run.json"))
-        total_key = "steps" if config["until_steady"] is None else "max_steps"
-        config[total_key]  # noqa: B018 (a KeyError here is a malformed run.json)
-    except (ValueError, KeyError, TypeError, AttributeError) as err:
+    except ModelError as err:
+        raise ModelError(f"cannot resume {out}: {err}") from None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
         raise ModelError(f"cannot resume {out}: run.json is not a run's ({err!r})") from None
-    if steps is not None:
+    total_key = "steps" if config["until_steady"] is None else "max_steps"
+    try:
+        if not isinstance(config["backend_options"], dict):
+            raise ModelError(f"backend_options must be a table, got {config['backend_options']!r}")
+        for name in ("dt", "perturb"):
+            if not _real(config[name]):
+                raise ModelError(f"{name} must be a number, got {config[name]!r}")
+        check_backend(config["backend"], scene, n=config["n"], dt=config["dt"],
+                      scheme=config["scheme"], constraints=config["constraints"],
+                      allow_underresolved=True, **config["backend_options"])
+        check_loop_options(steps=config["steps"], until_steady=config["until_steady"],
+                           max_steps=config["max_steps"], every=config["every"],
+                           checkpoint_every=config["checkpoint_every"],
+                           save_every=config["save_every"], shape_every=config["shape_every"])
+        if not (config["perturb"] >= 0 and isinstance(config["seed"], int)
+                and config["seed"] >= 0):
+            raise ModelError("perturb must be >= 0 and seed an integer >= 0")
+        if config["adaptive"] is not None:
+            AdaptiveDt(**config["adaptive"])
+    except ModelError as err:
+        raise ModelError(f"cannot resume {out}: run.json: {err}") from None
+    except (TypeError, ValueError) as err:
+        raise ModelError(f"cannot resume {out}: run.json: {err}") from None
+    if steps is not None:  # --steps N: continue to step N (checked as a new run's)
         check_loop_options(steps=steps, until_steady=None, max_steps=1, every=1)
         config[total_key] = steps
     state, ls, identity = read_checkpoint(out)
@@ -262,11 +363,16 @@ def resume(out: str | Path, *, steps: int | None = None, quiet: bool = True,
         raise ModelError(f"cannot resume {out}: its checkpoint.npz belongs to another run "
                          f"({_identity_text(identity)}; run.json says "
                          f"{_identity_text(run_identity(scene, config))})")
+    if not (isinstance(ls.k, int) and ls.k >= 0):
+        raise ModelError(f"cannot resume {out}: the checkpoint's step is {ls.k!r}, not an "
+                         "integer >= 0")
+    if not (_real(ls.t) and ls.t >= 0 and _real(ls.dt) and ls.dt > 0):
+        raise ModelError(f"cannot resume {out}: the checkpoint's time or time step is not "
+                         f"usable (t = {ls.t!r}, dt = {ls.dt!r})")
     if config[total_key] < ls.k:
         raise ModelError(f"the checkpoint is at step {ls.k}, past --steps {config[total_key]}")
-    be = build_backend(scene, config, state)
-    result = _execute(out, scene, config, quiet=quiet, start=(state, ls), be=be)
-    return (result, scene, config) if with_config else result
+    check_history(out / "history.csv", ls.k)
+    return scene, config, state, ls
 
 
 def run_identity(scene: Scene, config: dict) -> dict:
@@ -325,16 +431,31 @@ def read_checkpoint(out: Path) -> tuple[dict, LoopState, dict | None]:
 
 
 class _Series:
-    """The XDMF time series of a run (ParaView): the backend's point data every K steps."""
+    """The XDMF time series of a run (ParaView): the backend's point data at the start, every
+    ``save_every`` steps and at the end, one file per step (crash-consistent:
+    :class:`fem_ade.xdmf.XdmfSeries`). A resumed run reopens it from its checkpoint's step:
+    the intact steps of the schedule up to there are kept (not the end of an interrupted
+    sitting, nor its start again), so the series ends as the uninterrupted run's."""
 
-    def __init__(self, path: Path, be: Backend):
+    def __init__(self, path: Path, be: Backend, save_every: int | None,
+                 resume_from: int | None = None):
         points, cells = be.output_mesh()
-        self.xdmf = XdmfSeries(path, points, cells)
+
+        def scheduled(step: int) -> bool:
+            return step == 0 or bool(save_every) and step % save_every == 0
+
+        self.xdmf = XdmfSeries(path, points, cells, resume_from=resume_from, keep=scheduled)
         self.be, self.last_step = be, None
+        self.resume_from, self.scheduled = resume_from, scheduled
 
     def save(self, ls: LoopState) -> None:
         """Add the backend's current fields at step ``ls.k``, time ``ls.t``."""
-        self.xdmf.write(ls.t, self.be.point_data())
+        if ls.k == self.resume_from and not self.scheduled(ls.k):
+            return  # a resumed run's start is the checkpoint, not a step of the schedule
+        if ls.k == self.resume_from and any(e[0] == ls.k for e in self.xdmf.entries):
+            self.last_step = ls.k
+            return  # already in the series (kept from before)
+        self.xdmf.write(ls.t, self.be.point_data(), step=ls.k)
         self.last_step = ls.k
 
     def close(self) -> None:
@@ -364,7 +485,8 @@ class _Shapes:
         self.be, self.monitor, self.rows = be, monitor, []
         self.file = None
         if path is not None:
-            append = resume_from is not None and path.is_file()
+            append = (resume_from is not None and path.is_file()
+                      and path.read_text().startswith(",".join(self.COLUMNS)))
             if append:
                 self.rows = [{c: _cell(v) for c, v in r.items()}
                              for r in truncate_csv(path, resume_from - 1)]
@@ -386,8 +508,11 @@ class _Shapes:
                **{k: body.get(k, "") for k in ("elongation", "flatness", "necks", "dimple")}}
         self.rows.append(row)
         if self.file is not None:
-            self.file.write(",".join(str(row[c]) for c in self.COLUMNS) + "\n")
-            self.file.flush()
+            from .interrupt import critical
+
+            with critical():  # the row whole, or not at all
+                self.file.write(",".join(str(row[c]) for c in self.COLUMNS) + "\n")
+                self.file.flush()
         if self.monitor is not None:
             self.monitor(self.be, row)
 
@@ -396,9 +521,44 @@ class _Shapes:
             self.file.close()
 
 
+class WriteFailed(RuntimeError):
+    """Writing the run folder failed mid-run (disk full, gone, not writable): one line, with
+    what was kept (the command line's exit 3)."""
+
+
 def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool, be: Backend,
              start: tuple[dict, LoopState] | None = None, monitor=None) -> RunResult:
-    """Run the backend ``be`` as ``config`` says; the one place simulate/resume share."""
+    """Run the backend ``be`` as ``config`` says; the one place simulate/resume share.
+
+    A file system error while the folder is written (ENOSPC, EROFS, EIO, …) ends the run
+    with :class:`WriteFailed`; every file a later step trusts is written whole or not at all
+    (temporary name + rename), so the last checkpoint stays good for a resume."""
+    try:
+        return _execute_run(out, scene, config, quiet=quiet, be=be, start=start,
+                            monitor=monitor)
+    except OSError as err:
+        if out is None:
+            raise
+        for leftover in out.glob("*.tmp*"):  # a write cut short: nothing will read it
+            try:
+                leftover.unlink()
+            except OSError:
+                pass
+        where = err.filename or out
+        reason = (os.strerror(err.errno) if err.errno else " ".join(str(err).split())[:200])
+        kept = "no checkpoint was written (--checkpoint-every K keeps one)"
+        if (out / "checkpoint.npz").is_file():
+            try:
+                kept = (f"its last checkpoint (step {read_checkpoint(out)[1].k}) is kept: "
+                        f"python -m fem_ade.run --resume {out} continues from there")
+            except ModelError:
+                pass
+        raise WriteFailed(f"cannot write {where}: {reason}; {kept}") from None
+
+
+def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
+    from .interrupt import critical
+
     start_ls = start[1] if start is not None else None
     adaptive = AdaptiveDt(**config["adaptive"]) if config["adaptive"] else None
     columns = HISTORY_COLUMNS + tuple(be.extra_columns) + (("dt",) if adaptive else ())
@@ -413,8 +573,8 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool, be: B
             earlier = truncate_history(out / "history.csv", start_ls.k)
             writer = HistoryWriter(out / "history.csv", columns, append=True)
         # the ParaView series: the start, every save_every steps, the end
-        name = "phi.xdmf" if start is None else f"phi-from-{start_ls.k}.xdmf"
-        series = _Series(out / name, be)
+        series = _Series(out / "phi.xdmf", be, config["save_every"],
+                         None if start is None else start_ls.k)
     identity = run_identity(scene, config)
     observers = [(config["save_every"], series.save)] if series else []
     shapes = None
@@ -422,13 +582,18 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool, be: B
         shapes = _Shapes(be, out / "shapes.csv" if out else None, monitor,
                          start_ls.k if start_ls is not None else None)
         observers.append((config["shape_every"], shapes.observe))
+
+    def checkpoint(ls):
+        with critical():
+            write_checkpoint(out, be, ls, identity)
+
     try:
         result = run_loop(
             be, dt=config["dt"], steps=config["steps"], until_steady=config["until_steady"],
             max_steps=config["max_steps"], every=config["every"], quiet=quiet, history=writer,
             label=scene.name, adaptive=adaptive, checkpoint_every=config["checkpoint_every"],
-            on_checkpoint=(lambda ls: write_checkpoint(out, be, ls, identity)) if out else None,
-            observers=observers, start=start_ls, accelerate=config.get("accelerate", False))
+            on_checkpoint=checkpoint if out else None, observers=observers, start=start_ls,
+            accelerate=config.get("accelerate", False))
     finally:
         if writer is not None:
             writer.close()
@@ -439,7 +604,8 @@ def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool, be: B
     result.shape, grid = describe_final(be, result.final)
     result.final_grid = grid[0]
     if out is not None:
-        _finish(out, be, result, config, series, grid, earlier + result.history)
+        with critical():  # a signal now waits for the run's last files
+            _finish(out, be, result, config, series, grid, earlier + result.history)
     return result
 
 

@@ -1,6 +1,6 @@
-"""ParaView output: an XDMF time series of point fields on a mesh, written with meshio.
+"""ParaView output: a crash-consistent XDMF time series of point fields on a mesh.
 
-:class:`XdmfSeries` writes the mesh once and then one set of point fields per call of
+:class:`XdmfSeries` writes the mesh once and one set of point fields per call of
 :meth:`XdmfSeries.write`; open ``NAME.xdmf`` in ParaView (reader "XDMF Reader") and step
 through time. For the spectral grid, :meth:`XdmfSeries.from_grid` builds a uniform grid of
 hexahedra over the whole periodic box with the periodic images closed: n + 1 points per
@@ -9,26 +9,27 @@ faces; :meth:`write` accepts a grid field of shape (n, n, n) and adds that layer
 A finite-element backend passes its own ``points`` and ``cells`` (e.g. ``[("hexahedron",
 conn)]``, VTK node order) and point fields of length ``len(points)``.
 
-Data format: ``"HDF"`` (a compact ``NAME.h5`` next to the ``.xdmf``) needs h5py, which is
-not among fem_ade's dependencies; ``"XML"`` stores the values as text inside the ``.xdmf``
-(portable, larger: about 5 MB per 64³ field). ``"auto"`` (the default) uses HDF when h5py
-is importable, else XML. (meshio 5.3 writes the .h5, and the .bin files of its third format
-"Binary", in the current directory rather than next to the .xdmf; the HDF file is put next
-to the .xdmf here, and "Binary" is not offered.)
-
-The XML file is written when the series is closed: use it as a context manager or call
-:meth:`close` (a series left open at a crash has its HDF data but no readable .xdmf).
+Files (HDF5 through h5py; XDMF 3 as meshio writes it, which meshio's reader and ParaView
+read): the mesh in ``NAME.h5``, the fields of each saved step in ``NAME-KKKKKKKK.h5`` (K its
+step number, with the time and step as attributes), and the index ``NAME.xdmf``. Every file is
+written under a temporary name and renamed, and the index is rewritten after every step, so
+at any moment — a SIGKILL included — ``NAME.xdmf`` lists whole files only and nothing saved
+before is lost. ``resume_from=K`` reopens a series: the step files that are intact and not
+after step K are kept (a damaged one, or one a killed run wrote after its last checkpoint,
+is removed), the index is rebuilt from them, and new steps are appended.
 """
 
 from __future__ import annotations
 
-import importlib.util
+import os
+import re
 from pathlib import Path
+from xml.sax.saxutils import escape
 
-import meshio
 import numpy as np
 
-FORMATS = ("auto", "HDF", "XML")
+#: the XDMF names of the cell types a series takes (meshio's names → XDMF's)
+XDMF_CELLS = {"hexahedron": ("Hexahedron", 8), "quad": ("Quadrilateral", 4)}
 
 
 def periodic_grid(n: int | tuple[int, int, int], L: float | tuple[float, float, float],
@@ -71,7 +72,7 @@ def closed_grid_values(a: np.ndarray) -> np.ndarray:
 
 
 class XdmfSeries:
-    """An XDMF time series of point fields on a fixed mesh (meshio ``TimeSeriesWriter``).
+    """A crash-consistent XDMF time series of point fields on a fixed mesh (module docstring).
 
     Usage::
 
@@ -80,44 +81,138 @@ class XdmfSeries:
             series.write(1e-6, {"phi": phi1})
 
         XdmfSeries("out/fields.xdmf", points, [("hexahedron", conn)])  # any mesh
-
-    ``data_format``: "auto", "HDF" or "XML" (module docstring).
     """
 
     def __init__(self, path: str | Path, points: np.ndarray, cells, *,
-                 data_format: str = "auto", grid_shape: tuple[int, ...] | None = None):
-        if data_format not in FORMATS:
-            raise ValueError(f"unknown XDMF data format {data_format!r}; use one of {FORMATS}")
-        if data_format == "auto":
-            data_format = "HDF" if importlib.util.find_spec("h5py") is not None else "XML"
+                 grid_shape: tuple[int, ...] | None = None, resume_from: int | None = None,
+                 keep=None):
+        import h5py
+
+        self._h5py = h5py
         self.path = Path(path)
-        self.data_format = data_format
         self.points = np.asarray(points, dtype=float)
         if isinstance(cells, np.ndarray):
             cells = [("hexahedron", cells)]
         self.cells = [(str(kind), np.asarray(conn, dtype=np.int64)) for kind, conn in cells]
+        for kind, _ in self.cells:
+            if kind not in XDMF_CELLS:
+                raise ValueError(f"unknown cell type {kind!r}; valid: {', '.join(XDMF_CELLS)}")
         self.grid_shape = grid_shape
-        self.times: list[float] = []
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._writer = meshio.xdmf.TimeSeriesWriter(self.path, data_format=data_format)
-        if data_format == "HDF":
-            # meshio 5.3 opens NAME.h5 in the current directory, while the .xdmf refers to it
-            # next to itself: open it next to the .xdmf instead of calling __enter__
-            import h5py
-
-            self._writer.h5_filename = str(self.path.with_suffix(".h5"))
-            self._writer.h5_file = h5py.File(self._writer.h5_filename, "w")
-        self._writer.write_points_cells(self.points, self.cells)
+        self.mesh_file = self.path.with_suffix(".h5")
+        #: (step, t, file name, {field: (shape)}) of every step in the index
+        self.entries: list[tuple[int, float, str, dict]] = []
+        if resume_from is not None:
+            self.entries = self._intact_steps(resume_from, keep)
+        if not self._mesh_intact():
+            self._atomic_h5(self.mesh_file, {"points": self.points,
+                                             **{f"cells{i}": c for i, (_, c) in
+                                                enumerate(self.cells)}}, {})
+        self._write_index()
         self._open = True
 
+    @property
+    def times(self) -> list[float]:
+        return [t for _, t, _, _ in self.entries]
+
     @classmethod
-    def from_grid(cls, path: str | Path, n: int, L: float, *, data_format: str = "auto",
-                  origin=(0.0, 0.0, 0.0), dim: int = 3) -> XdmfSeries:
+    def from_grid(cls, path: str | Path, n: int, L: float, *, origin=(0.0, 0.0, 0.0),
+                  dim: int = 3, resume_from: int | None = None, keep=None) -> XdmfSeries:
         """A series on the periodic n^dim grid of period L, periodic images closed
         (:func:`grid_mesh`); :meth:`write` then takes (n,)*dim fields."""
         points, cells = grid_mesh(n, L, dim, origin)
-        return cls(path, points, cells, data_format=data_format, grid_shape=(n,) * dim)
+        return cls(path, points, cells, grid_shape=(n,) * dim, resume_from=resume_from,
+                   keep=keep)
 
+    # -- files ------------------------------------------------------------------------------
+    def _step_file(self, step: int) -> Path:
+        return self.path.with_name(f"{self.path.stem}-{step:08d}.h5")
+
+    def _atomic_h5(self, path: Path, arrays: dict, attrs: dict) -> None:
+        tmp = path.with_name(path.stem + ".tmp.h5")
+        with self._h5py.File(tmp, "w") as f:
+            for name, value in arrays.items():
+                f.create_dataset(name, data=value)
+            for name, value in attrs.items():
+                f.attrs[name] = value
+        os.replace(tmp, path)
+
+    def _mesh_intact(self) -> bool:
+        try:
+            with self._h5py.File(self.mesh_file, "r") as f:
+                same = np.array_equal(f["points"][()], self.points) and all(
+                    np.array_equal(f[f"cells{i}"][()], c) for i, (_, c) in enumerate(self.cells))
+            return bool(same)
+        except (OSError, KeyError, ValueError):
+            return False
+
+    def _intact_steps(self, last: int, keep=None) -> list:
+        """The step files of this series that open, hold their fields, are not after
+        ``last`` and pass ``keep(step)`` (default: all); the others (damaged, written after
+        the checkpoint, or not wanted) are removed."""
+        pattern = re.compile(rf"^{re.escape(self.path.stem)}-(\d{{8}})\.h5$")
+        for leftover in self.path.parent.glob(f"{self.path.stem}*.tmp*"):  # cut-short writes
+            leftover.unlink()
+        kept = []
+        for f in sorted(self.path.parent.iterdir()):
+            m = pattern.match(f.name)
+            if not m:
+                continue
+            step = int(m.group(1))
+            entry = None
+            if step <= last and (keep is None or keep(step)):
+                try:
+                    with self._h5py.File(f, "r") as h:
+                        fields = {k: h[k].shape for k in h.keys()}
+                        entry = (step, float(h.attrs["t"]), f.name, fields)
+                except (OSError, KeyError, ValueError):
+                    entry = None
+            if entry is None or not entry[3] or any(
+                    shape[0] != len(self.points) for shape in entry[3].values()):
+                f.unlink()
+                continue
+            kept.append(entry)
+        return kept
+
+    def _write_index(self) -> None:
+        """NAME.xdmf from the entries, atomically."""
+        P = len(self.points)
+        mesh = self.mesh_file.name
+        lines = ['<?xml version="1.0"?>',
+                 '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">',
+                 "  <Domain>",
+                 '    <Grid Name="mesh" GridType="Uniform">',
+                 f'      <Geometry GeometryType="XYZ"><DataItem DataType="Float" '
+                 f'Dimensions="{P} 3" Format="HDF" Precision="8">{escape(mesh)}:/points'
+                 "</DataItem></Geometry>"]
+        for i, (kind, conn) in enumerate(self.cells):
+            name, per = XDMF_CELLS[kind]
+            lines.append(f'      <Topology TopologyType="{name}" NumberOfElements="'
+                         f'{len(conn)}"><DataItem DataType="Int" Dimensions="{len(conn)} '
+                         f'{per}" Format="HDF" Precision="8">{escape(mesh)}:/cells{i}'
+                         "</DataItem></Topology>")
+        lines += ["    </Grid>",
+                  '    <Grid Name="TimeSeries" GridType="Collection" '
+                  'CollectionType="Temporal">']
+        ptr = ('xpointer(//Grid[@Name=&quot;mesh&quot;]/*[self::Topology or '
+               'self::Geometry])')
+        for step, t, file, fields in self.entries:
+            lines += [f'      <Grid Name="step {step}">', f'        <xi:include xpointer="{ptr}"/>',
+                      f'        <Time Value="{t!r}"/>']
+            for name, shape in fields.items():
+                kind = "Scalar" if len(shape) == 1 else "Vector"
+                dims = " ".join(str(d) for d in shape)
+                lines.append(f'        <Attribute Name="{escape(name)}" AttributeType="{kind}" '
+                             f'Center="Node"><DataItem DataType="Float" Dimensions="{dims}" '
+                             f'Format="HDF" Precision="8">{escape(file)}:/{escape(name)}'
+                             "</DataItem></Attribute>")
+            lines.append("      </Grid>")
+        lines += ["    </Grid>", "  </Domain>", "</Xdmf>", ""]
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        tmp.write_text("\n".join(lines))
+        os.replace(tmp, self.path)
+
+    # -- the series ----------------------------------------------------------------------------
     def _point_values(self, name: str, values) -> np.ndarray:
         a = np.asarray(values, dtype=float)
         d = 0 if self.grid_shape is None else len(self.grid_shape)
@@ -129,19 +224,25 @@ class XdmfSeries:
                              f"points (shape {np.shape(values)})")
         return a
 
-    def write(self, t: float, point_data: dict) -> None:
-        """Append the fields ``point_data`` (name → values) at time ``t``."""
+    def write(self, t: float, point_data: dict, step: int | None = None) -> None:
+        """Add the fields ``point_data`` (name → values) at time ``t`` as step ``step``
+        (default: one after the last): its file, then the index."""
         if not self._open:
             raise RuntimeError(f"{self.path} is closed")
         data = {k: self._point_values(k, v) for k, v in point_data.items()}
-        self._writer.write_data(float(t), point_data=data)
-        self.times.append(float(t))
+        if step is None:
+            step = self.entries[-1][0] + 1 if self.entries else 0
+        step = int(step)
+        file = self._step_file(step)
+        self._atomic_h5(file, data, {"t": float(t), "step": step})
+        self.entries = [e for e in self.entries if e[0] != step]
+        self.entries.append((step, float(t), file.name, {k: v.shape for k, v in data.items()}))
+        self.entries.sort(key=lambda e: e[0])
+        self._write_index()
 
     def close(self) -> None:
-        """Write the .xdmf file (and close the .h5). Idempotent."""
-        if self._open:
-            self._open = False
-            self._writer.__exit__(None, None, None)
+        """Nothing is left to write (the index is current after every step). Idempotent."""
+        self._open = False
 
     def __enter__(self) -> XdmfSeries:
         return self
@@ -151,7 +252,9 @@ class XdmfSeries:
 
 
 def read_series(path: str | Path) -> tuple[np.ndarray, list, list[tuple[float, dict]]]:
-    """Read an XDMF time series back: (points, cells, [(t, point_data), ...])."""
+    """Read an XDMF time series back with meshio: (points, cells, [(t, point_data), ...])."""
+    import meshio
+
     with meshio.xdmf.TimeSeriesReader(path) as reader:
         points, cells = reader.read_points_cells()
         steps = []

@@ -451,8 +451,12 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
             "history": [{k: h[k] for k in ("step", "E", "W", "G", "V", "A")} for h in r.history],
             "rises": energy_rises(r.history),
         }
-        for f in ("final.npz", "run.json", "initial.npz", "phi.h5", "phi.xdmf"):
+        from fem_ade.output import series_files
+
+        for f in ("final.npz", "run.json", "initial.npz"):
             (out / f).unlink(missing_ok=True)
+        for f in series_files(out):
+            f.unlink()
         if not quiet:
             print(label, json.dumps(report["runs"][label]["end"]), flush=True)
     rep_path.parent.mkdir(parents=True, exist_ok=True)

@@ -222,10 +222,11 @@ def analyse(folder: Path, scene) -> dict:
 def slim(folder: Path) -> None:
     """Delete what the results do not need (fields, series, checkpoints) and make the
     pictures compact (256 colours)."""
-    for name in ("final.npz", "checkpoint.npz", "phi.h5", "phi.xdmf", "run.json",
-                 "initial.npz"):
+    from fem_ade.output import series_files
+
+    for name in ("final.npz", "checkpoint.npz", "run.json", "initial.npz"):
         (folder / name).unlink(missing_ok=True)
-    for p in folder.glob("phi-from-*"):
+    for p in series_files(folder):
         p.unlink()
     for png in folder.glob("*.png"):
         try:

@@ -1,0 +1,54 @@
+"""Ctrl-C and SIGTERM as KeyboardInterrupt, never in the middle of a file a later step trusts.
+
+The command line installs :func:`handler` for SIGINT and SIGTERM (:func:`install`; for
+SIGINT too, because a process started from a non-interactive shell inherits SIGINT ignored).
+Outside a :func:`critical` section the handler raises KeyboardInterrupt at once (the loop
+then writes its checkpoint and the run ends with status ``interrupted``, exit 130). Inside
+one — the writing of a checkpoint, of the final fields, of the summary — it only notes the
+signal, and KeyboardInterrupt is raised when the section ends: the file is whole, then the
+run stops.
+"""
+
+from __future__ import annotations
+
+import signal
+from contextlib import contextmanager
+
+_depth = 0
+_pending: int | None = None
+
+
+def handler(signum, frame) -> None:
+    global _pending
+    if _depth:
+        _pending = signum
+        return
+    raise KeyboardInterrupt
+
+
+def install() -> None:
+    """SIGINT and SIGTERM → :func:`handler` (in the main thread of the command line)."""
+    signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, handler)
+
+
+def pending() -> bool:
+    """True while a signal that arrived in a critical section waits to be raised."""
+    return _pending is not None
+
+
+@contextmanager
+def critical():
+    """A section a signal does not cut short (nestable); a signal that arrived meanwhile is
+    raised as KeyboardInterrupt when the outermost section ends without an error."""
+    global _depth, _pending
+    _depth += 1
+    try:
+        yield
+    except BaseException:
+        _depth -= 1
+        raise
+    _depth -= 1
+    if _depth == 0 and _pending is not None:
+        _pending = None
+        raise KeyboardInterrupt
