@@ -211,18 +211,20 @@ def check_choice(what: str, value, valid) -> None:
         raise ModelError(f"unknown {what} {value!r}; valid: {', '.join(map(str, valid))}")
 
 
-def backend_class(name: str) -> type:
-    """The class of backend ``name`` (:data:`fem_ade.registry.BACKENDS`), imported on demand."""
+def backend_class(name: str, **options) -> type:
+    """The class of backend ``name`` that runs ``options`` (:data:`fem_ade.registry.BACKENDS`:
+    its class, or a variant's, e.g. the PETSc FEM for ``linalg="petsc"``), imported on
+    demand."""
     check_choice("backend", name, BACKENDS)
-    module_name, cls_name = BACKENDS[name].target.split(":")
+    module_name, cls_name = BACKENDS[name].target_for(**options).split(":")
     return getattr(importlib.import_module(module_name), cls_name)
 
 
 def check_backend(name: str, scene: Scene, **kwargs) -> None:
     """Validate a run of backend ``name`` before anything is built (see :meth:`Backend.check`)."""
-    backend_class(name).check(scene, **kwargs)
+    backend_class(name, **kwargs).check(scene, **kwargs)
 
 
 def make_backend(name: str, scene: Scene, **kwargs) -> Backend:
     """Build backend ``name`` for ``scene``. Unknown names raise :class:`ModelError`."""
-    return backend_class(name)(scene, **kwargs)
+    return backend_class(name, **kwargs)(scene, **kwargs)

@@ -71,12 +71,22 @@ class Option:
 
 @dataclass(frozen=True)
 class BackendSpec:
-    """A backend: where its class lives ("module:Class") and the options it takes."""
+    """A backend: where its class lives ("module:Class"), the options it takes, and the
+    classes that stand in for it for some option values (``variants``: ((option, value),
+    "module:Class"), e.g. the FEM distributed over MPI ranks for ``linalg="petsc"``)."""
 
     name: str
     target: str
     description: str
     options: tuple[Option, ...] = ()
+    variants: tuple[tuple[tuple[str, object], str], ...] = ()
+
+    def target_for(self, **options) -> str:
+        """The "module:Class" of the class that runs these options."""
+        for (option, value), target in self.variants:
+            if options.get(option) == value:
+                return target
+        return self.target
 
     @property
     def option_names(self) -> tuple[str, ...]:
@@ -109,6 +119,7 @@ BACKENDS = {
                    "numpy (default: one process) or petsc (PETSc KSP + hypre/GAMG, the mesh "
                    "distributed over the ranks of mpirun; README 'Running on a cluster')"),
         ),
+        variants=((("linalg", "petsc"), "fem_ade.fem.petsc:PETScFEMBackend"),),
     ),
     "spectral": BackendSpec(
         "spectral", "spectral_ref.solver:SpectralBackend",

@@ -7,7 +7,9 @@ from the kinds of :mod:`fem_ade.initial` with two free sizes. The sizes are chos
 reference, equal α and β (:func:`size`): a shape sized by its sharp formulas has the wrong
 diffuse values at these interface widths, e.g. a torus by 2π²Rr² = α, 4π²Rr = β has a hole of
 half an ε and closes at once. The sizes found are stored here (:data:`SIZES`);
-``python -m fem_ade.seeds`` recomputes them and ``tests/test_seeds.py`` checks them.
+``python -m fem_ade.seed_sizes`` recomputes them (:mod:`fem_ade.seed_sizes`, which runs the
+spectral backend: this module, a catalogue the scenes read, imports no backend) and
+``tests/test_seeds.py`` checks them.
 
 Five scenes have no seed: at ε = 0.05 (``biconcave``, the gourds, ``cylinder``) no disc, pair
 of beads or capsule with equilibrium profiles has both: with diffuse V = α its diffuse area is
@@ -16,10 +18,6 @@ radius, carries most of the diffuse volume (SPEC §7).
 """
 
 from __future__ import annotations
-
-import sys
-
-import numpy as np
 
 from .initial import Capsule, Discocyte, Spheres, Starfish, Torus
 
@@ -90,57 +88,3 @@ def seeded_shape(name: str):
         why = NO_SEED.get(name, "it is not one of the paper's scenes")
         raise ModelError(f"scene {name!r} has no seeded initial condition: {why}")
     return FAMILIES[name][1](*SIZES[name])
-
-
-def diffuse_values(scene, shape, n: int | None = None) -> dict:
-    """The diagnostics (V, A, ...) of φ₀ = tanh(s/(√2ε)) for ``shape`` on the scene's grid,
-    measured by the spectral reference."""
-    from .backend import make_backend
-
-    return make_backend("spectral", scene.with_(ic=shape), n=n or scene.n).diagnostics()
-
-
-def size(scene, family, guess, n: int | None = None, tol: float = 2e-4):
-    """(sizes, shape) with diffuse V = α and A = β (relative ``tol``): a 2D Newton search
-    on the logarithms of the sizes, from ``guess``."""
-    from scipy.optimize import root
-
-    p = scene.params
-
-    def residual(x):
-        d = diffuse_values(scene, family(*np.exp(x)), n)
-        return [d["V"] / p.alpha - 1.0, d["A"] / p.beta - 1.0]
-
-    sol = root(residual, np.log(guess), method="hybr", options={"xtol": 1e-10})
-    res = residual(sol.x)
-    if max(abs(r) for r in res) > tol:
-        raise RuntimeError(f"{scene.name}: no sizes with diffuse V = alpha, A = beta near "
-                           f"{guess} (residual {res})")
-    sizes = tuple(float(v) for v in np.exp(sol.x))
-    return sizes, family(*sizes)
-
-
-def main(argv=None) -> dict:
-    """Recompute the sizes of every seeded scene and print them (the catalogue's SEEDS)."""
-    from .scenes import PAPER_SCENES
-
-    out = {}
-    names = argv or list(FAMILIES)
-    for name in names:
-        what, family, guess = FAMILIES[name]
-        scene = PAPER_SCENES[name]
-        try:
-            sizes, shape = size(scene, family, guess)
-        except RuntimeError as err:
-            print(f"    # {err}", flush=True)
-            continue
-        d = diffuse_values(scene, shape)
-        out[name] = sizes
-        print(f"    {name!r}: ({sizes[0]:.6f}, {sizes[1]:.6f}),  # {what}: V/alpha "
-              f"{d['V'] / scene.params.alpha:.5f}, A/beta {d['A'] / scene.params.beta:.5f}, "
-              f"eps {scene.params.eps}", flush=True)
-    return out
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]) and 0)

@@ -3,7 +3,8 @@
 Written straight from the formulas, independently of the finite-element physics, so that
 the two backends cross-check each other. It shares with the FEM only the scene catalogue and
 its parameters (the scalar parts of E_M in :class:`fem_ade.model.Params`), and generic code
-that holds no physics (the backend base, the multiplier Newton solve, output meshes).
+that holds no physics (the backend base with the constraints' target ramp, output meshes):
+its energy terms, forces, stabilization and constraint multipliers are its own.
 
 Conventions (SPEC §6): grid x_j = jL/n in each direction; derivatives by FFT (``rfftn``);
 integrals by the rectangle rule h^d Σ; no dealiasing.
@@ -26,8 +27,8 @@ import numpy as np
 from scipy import fft
 
 from fem_ade.backend import BackendBase, fft_workers
-from fem_ade.constraints import solve_multipliers
-from fem_ade.model import ModelError, ratchet_stabilization, stabilization_coefficients
+from fem_ade.constraints import ConstraintError
+from fem_ade.model import ModelError
 from fem_ade.xdmf import closed_grid_values, grid_mesh
 
 SQRT2 = math.sqrt(2.0)
@@ -109,10 +110,73 @@ def area_difference_gradient(phi, lap, eps, coef):
     return P, Q
 
 
+def stabilization(p, A, dA, V):
+    """(s₀, s₂) of the large-step scheme (SPEC §10): the Lipschitz bounds of the explicit
+    terms' linearisations for |φ| ≤ 1 — bending 8κ/ε³ and 6κ/ε; the area penalty's force
+    c_A f, c_A = (3√2/2)M₂(A − β): 2|c_A|/ε and |c_A|ε; the ADE force, c_G =
+    (3κ̄π/(4A₀D))(ΔA − ΔA₀): 8|c_G|/ε² and 4|c_G|; the localized volume penalty:
+    (3/2)|2M₁(V − α)|. (Written here from the formulas, apart from the FEM's copy, so that the
+    two backends check each other's scheme.)"""
+    s0 = 8.0 * p.kappa / p.eps**3
+    s2 = 6.0 * p.kappa / p.eps
+    if A is not None:
+        cA = abs(1.5 * SQRT2 * p.M2 * (A - p.beta))
+        s0 += 2.0 * cA / p.eps
+        s2 += cA * p.eps
+    if dA is not None:
+        cG = abs(0.75 * p.kappa_bar * math.pi / (p.A0 * p.D) * (dA - p.delta_A0))
+        s0 += 8.0 * cG / p.eps**2
+        s2 += 4.0 * cG
+    if V is not None and p.localized_volume:
+        s0 += 1.5 * abs(2.0 * p.M1 * (V - p.alpha))
+    return s0, s2
+
+
+def ratchet(current, required):
+    """Keep the (s₀, s₂) in use unless the required ones exceed them or fall below half of
+    them: larger coefficients only damp more, and the FEM rebuilds its solver less often."""
+    if current is None or any(r > c or r < 0.5 * c
+                              for r, c in zip(required, current, strict=True)):
+        return required
+    return current
+
+
+def newton_multipliers(measure, alpha, beta, tol=1e-10, maxit=30):
+    """(a, b) with V = α and A = β at φ₀ + a z_V + b z_A: Newton on the 2×2 system
+    ``measure(a, b) -> (V, A, J)``, steps halved while they do not reduce
+    max(|V/α − 1|, |A/β − 1|); ConstraintError when it does not converge."""
+    def residual(V, A):
+        return max(abs(V / alpha - 1.0), abs(A / beta - 1.0))
+
+    a = b = 0.0
+    V, A, J = measure(a, b)
+    res = residual(V, A)
+    for it in range(maxit + 1):
+        if res < tol:
+            return a, b, it
+        try:
+            da, db = np.linalg.solve(J, [alpha - V, beta - A])
+        except np.linalg.LinAlgError:
+            break
+        step = 1.0
+        while step > 1e-4:
+            V1, A1, J1 = measure(a + step * da, b + step * db)
+            r1 = residual(V1, A1)
+            if math.isfinite(r1) and r1 < res:
+                break
+            step *= 0.5
+        else:
+            break
+        a, b, V, A, J, res = a + step * da, b + step * db, V1, A1, J1, r1
+    raise ConstraintError(f"the constraint multipliers did not converge: |V/alpha - 1| = "
+                          f"{abs(V / alpha - 1):.2g}, |A/beta - 1| = {abs(A / beta - 1):.2g} "
+                          "(reduce dt)")
+
+
 def stabilization_symbol(k2, p, s0, s2, dim):
     """The diagonal part S of the large-step scheme, added as S(φⁿ⁺¹ − φⁿ) (SPEC §10).
 
-    S = s₀ + s₂|k|² (:func:`fem_ade.model.stabilization_coefficients`) + σ_V δ_k0, where
+    S = s₀ + s₂|k|² (:func:`stabilization`) + σ_V δ_k0, where
     σ_V = 2M₁·(½)²|Ω| = M₁|Ω|/2 is the paper's volume penalty's rank-one Hessian (g_V = ½),
     which acts on the mean only (the localized one's is a rank-one term of the step solver).
     """
@@ -242,7 +306,7 @@ class SpectralBackend(BackendBase):
                     if p.localized_volume else JV, [dV * float(np.sum(gA * z)) for z, _ in zs]]
             return volume(u, dV, p), area(u, lu, p, dV), np.array(rows)
 
-        a, b, _ = self.ramp.solve(lambda targets: solve_multipliers(measure, *targets))
+        a, b, _ = self.ramp.solve(lambda targets: newton_multipliers(measure, *targets))
         # φ from φ̂ (not the sums the Newton solve used): the state is φ̂ alone, so that a
         # resumed run is bit for bit the uninterrupted one
         self._set_hat(base_hat + a * zs_hat[0] + b * zs_hat[1])
@@ -268,7 +332,7 @@ class SpectralBackend(BackendBase):
         if self.scheme == "paper":
             return lambda rhs: rhs / self.symbol
         p, phi, lap = self.params, self.phi, self.lap
-        self.stab = ratchet_stabilization(self.stab, stabilization_coefficients(p, A, dA, V))
+        self.stab = ratchet(self.stab, stabilization(p, A, dA, V))
         d = self.symbol + stabilization_symbol(self.k2, p, *self.stab, self.dim)
         low_rank = []
         if V is not None and p.localized_volume and p.volume_curvature > 0:

@@ -79,3 +79,75 @@ def test_readme_and_ci_run_the_same_tests():
           if "-m pytest" in line and not line.lstrip().startswith("#")]
     assert ci == [test_command], (ci, test_command)
     assert "fem_ade.run torus" in commands[0]
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """Every module of fem_ade and spectral_ref → the modules of the two it imports, at the
+    top or inside a function (a lazy import is still a dependency)."""
+    root = PACKAGE.parent
+    files = {}
+    for pkg in ("fem_ade", "spectral_ref"):
+        for path in (root / pkg).rglob("*.py"):
+            parts = list(path.relative_to(root).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            files[".".join(parts)] = path
+    graph = {}
+    for name, path in files.items():
+        is_pkg = path.name == "__init__.py"
+        base = name.split(".") if is_pkg else name.split(".")[:-1]
+        deps = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            targets = []
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    head = base[: len(base) - node.level + 1]
+                    mod = ".".join(head + ([node.module] if node.module else []))
+                else:
+                    mod = node.module or ""
+                subs = [f"{mod}.{a.name}" for a in node.names if f"{mod}.{a.name}" in files]
+                targets = subs or [mod]  # `from . import sub` needs sub, not the package
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            deps.update(t for t in targets if t in files and t != name)
+        graph[name] = deps
+    return graph
+
+
+def test_no_import_circles():
+    """No module reaches itself through imports (lazy ones included): each layer stands on
+    the ones below it."""
+    graph = _module_graph()
+    state, stack, cycles = {}, [], []
+
+    def visit(node):
+        state[node] = "open"
+        stack.append(node)
+        for dep in sorted(graph[node]):
+            if state.get(dep) == "open":
+                cycles.append(stack[stack.index(dep):] + [dep])
+            elif dep not in state:
+                visit(dep)
+        stack.pop()
+        state[node] = "done"
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node)
+    assert not cycles, "import circles: " + "; ".join(" -> ".join(c) for c in cycles)
+
+
+def test_spectral_reference_shares_no_physics():
+    """spectral_ref imports from fem_ade only what holds no physics (the backend base, the
+    targets' ramp, output helpers), so that an error in the FEM's physics cannot hide in a
+    comparison with it."""
+    graph = _module_graph()
+    allowed = {"fem_ade.backend", "fem_ade.xdmf", "fem_ade.model", "fem_ade.constraints"}
+    used = {d for d in graph["spectral_ref.solver"] if d.startswith("fem_ade")}
+    assert used <= allowed, used
+    source = (PACKAGE.parent / "spectral_ref" / "solver.py").read_text()
+    imported = {a.name for node in ast.walk(ast.parse(source))
+                if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("fem_ade")
+                for a in node.names}
+    assert imported <= {"BackendBase", "fft_workers", "ModelError", "ConstraintError",
+                        "closed_grid_values", "grid_mesh"}, imported

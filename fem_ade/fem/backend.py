@@ -49,13 +49,6 @@ class FEMBackend(BackendBase):
     linalg = "numpy"
     solver_factory = staticmethod(make_solver)
 
-    def __new__(cls, *args, linalg: str = "numpy", **kwargs):
-        if linalg == "petsc" and cls is FEMBackend:
-            from .petsc import PETScFEMBackend
-
-            return super().__new__(PETScFEMBackend)
-        return super().__new__(cls)
-
     def __init__(self, scene: Scene, *, n: int, dt: float | None = None,
                  ic: str = "consistent", perturb: float = 0.0, seed: int = 0,
                  scheme: str = "paper", constraints: str = "penalty", order: int = 1,
@@ -65,6 +58,10 @@ class FEMBackend(BackendBase):
         super().__init__(scene, n=n, scheme=scheme, constraints=constraints)
         check_choice("FEM order", order, FEM_ORDERS)
         check_choice("FEM solver", solver, FEM_SOLVERS)
+        if linalg != self.linalg:
+            raise ModelError(f"{type(self).__name__} runs with linalg={self.linalg!r}; "
+                             f"make_backend('fem', ..., linalg={linalg!r}) builds the one "
+                             "for it")
         self.order = order
         p = self.params
         self.mesh = fmesh.make(self.scene.dim, n, p.L, mesh)
@@ -143,9 +140,8 @@ class FEMBackend(BackendBase):
                              f"hexahedra); order {order} needs a tensor mesh (uniform or "
                              "graded)")
         if linalg == "petsc":
-            from .petsc import check_options as check_petsc
-
-            check_petsc(scene, n, order=order, mesh=mesh, solver=solver)
+            if cls.linalg != "petsc":
+                raise ModelError("--linalg petsc: check through fem_ade.backend.check_backend")
         elif solver in EXACT and not tensor:
             raise ModelError(f"solver {solver!r} needs a tensor mesh (uniform or graded), "
                              "not a mesh file")

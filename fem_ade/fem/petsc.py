@@ -418,10 +418,20 @@ def check_options(scene, n, *, order=1, mesh=None, solver="auto") -> None:
 
 class PETScFEMBackend(FEMBackend):
     """:class:`fem_ade.fem.backend.FEMBackend` with its DOFs distributed over the MPI ranks
-    (module docstring): ``FEMBackend(..., linalg="petsc")`` builds one."""
+    (module docstring): ``make_backend("fem", ..., linalg="petsc")`` builds one (the
+    registry's variant of the FEM for that option)."""
 
     linalg = "petsc"
     solver_factory = staticmethod(petsc_solver)
+
+    @classmethod
+    def check_options(cls, scene, n, *, order=1, mesh=None, solver="auto", linalg="petsc",
+                      rtol=None) -> float:
+        """The FEM's checks, then what ``--linalg petsc`` takes (:func:`check_options`)."""
+        spacing = super().check_options(scene, n, order=order, mesh=mesh, solver=solver,
+                                        linalg=linalg, rtol=rtol)
+        check_options(scene, n, order=order, mesh=mesh, solver=solver)
+        return spacing
 
     def _space(self):
         ops = TensorOperators(self.mesh, self.order)
