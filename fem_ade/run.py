@@ -25,6 +25,35 @@ RESUME_OPTIONS = {"resume", "steps", "quiet"}
 
 
 class _Parser(argparse.ArgumentParser):
+    """The command line's parser: one clear line and exit 2 on an error; ``options`` lists
+    every option added (the Actions ``add_argument`` returns, also from argument groups)."""
+
+    def __init__(self, *args, **kwargs):
+        self.options: list[argparse.Action] = []  # before argparse adds its -h
+        super().__init__(*args, **kwargs)
+
+    def add_argument(self, *args, **kwargs):
+        action = super().add_argument(*args, **kwargs)
+        self.options.append(action)
+        return action
+
+    def _recording(self, group):
+        add, options = group.add_argument, self.options
+
+        def recorded(*a, **kw):
+            action = add(*a, **kw)
+            options.append(action)
+            return action
+
+        group.add_argument = recorded
+        return group
+
+    def add_argument_group(self, *args, **kwargs):
+        return self._recording(super().add_argument_group(*args, **kwargs))
+
+    def add_mutually_exclusive_group(self, *args, **kwargs):
+        return self._recording(super().add_mutually_exclusive_group(*args, **kwargs))
+
     def error(self, message):  # one clear line, exit code 2
         self.exit(EXIT_BAD_INPUT, f"fem_ade.run: error: {message}\n")
 
@@ -216,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
 def given_options(argv, parser) -> set[str]:
     """The options the user typed (their ``dest`` names), whatever their values."""
     given = set()
-    for action in parser._actions:
+    for action in parser.options:
         for opt in action.option_strings:
             if any(a == opt or a.startswith(opt + "=") for a in argv):
                 given.add(action.dest)

@@ -47,7 +47,7 @@ def test_registry_matches_the_backend_classes(name):
 
 
 def test_cli_choices_come_from_the_registry():
-    actions = {a.dest: a for a in build_parser()._actions}
+    actions = {a.dest: a for a in build_parser().options}
     assert tuple(actions["backend"].choices) == tuple(BACKENDS)
     assert tuple(actions["scheme"].choices) == tuple(SCHEMES)
     assert tuple(actions["constraints"].choices) == tuple(CONSTRAINTS)

@@ -40,6 +40,8 @@ class PeriodicMesh:
     axes: tuple[np.ndarray, ...] | None = None  # per axis: nodes 0 = x0 < .. < xn = L
     source: str = ""
     _skfem: object = field(default=None, repr=False)
+    #: the file's mesh before its opposite faces were identified (scikit-fem, non-periodic)
+    original: object = field(default=None, repr=False)
 
     @property
     def is_tensor(self) -> bool:
@@ -56,7 +58,7 @@ class PeriodicMesh:
         """Smallest cell edge (tensor) or smallest element extent (file)."""
         if self.axes is not None:
             return float(min(np.diff(a).min() for a in self.axes))
-        m = self.skfem_mesh()._orig
+        m = self.original
         ext = np.ptp(m.p[:, m.t], axis=1)
         return float(ext.min())
 
@@ -64,7 +66,7 @@ class PeriodicMesh:
     def h_max(self) -> float:
         if self.axes is not None:
             return float(max(np.diff(a).max() for a in self.axes))
-        m = self.skfem_mesh()._orig
+        m = self.original
         return float(np.ptp(m.p[:, m.t], axis=1).max())
 
     def skfem_mesh(self):
@@ -245,7 +247,8 @@ def from_file(path: str | Path, dim: int = 3, L: float | None = None) -> Periodi
             f"(about {np.round(ncell, 2).tolist()})"
         )
     periodic = periodify(mesh, ext, lo)
-    return PeriodicMesh("file", dim, float(ext[0]), source=str(path), _skfem=periodic)
+    return PeriodicMesh("file", dim, float(ext[0]), source=str(path), _skfem=periodic,
+                        original=mesh)
 
 
 #: the grading of ``graded`` without ``:g``

@@ -40,14 +40,31 @@ def closed_mesh(mesh: PeriodicMesh, space):
     else:
         from skfem.io.meshio import to_meshio
 
-        sm = mesh.skfem_mesh()
-        mio = to_meshio(sm._orig)
+        mio = to_meshio(mesh.original)  # the file's own vertices and cells
         points = mio.points
         kind, cells = mio.cells[0].type, mio.cells[0].data
-        index = space.basis.nodal_dofs[0][sm._ix]
+        index = _vertex_dofs(mesh, space, points)
     if points.shape[1] == 2:
         points = np.column_stack([points, np.zeros(len(points))])
     return points, [(kind, cells)], index
+
+
+def _vertex_dofs(mesh: PeriodicMesh, space, points: np.ndarray) -> np.ndarray:
+    """The DOF of the periodic space at each vertex of the file's mesh: matched by coordinates
+    modulo the box (the periodic images of a face share their DOF)."""
+    dim = mesh.dim
+    dofs = space.basis.nodal_dofs[0]
+    where = np.asarray(space.basis.doflocs)[:, dofs]
+    lo = mesh.original.p.min(axis=1)
+    tol = 1e-6 * mesh.h_min
+
+    def keys(x):
+        wrapped = np.mod(x - lo[:, None], mesh.L)
+        wrapped[np.isclose(wrapped, mesh.L, atol=tol, rtol=0.0)] = 0.0
+        return [tuple(k) for k in np.round(wrapped / tol).astype(np.int64).T]
+
+    lookup = dict(zip(keys(where), dofs, strict=True))
+    return np.array([lookup[k] for k in keys(np.asarray(points)[:, :dim].T)])
 
 
 def uniform_grid_field(mesh: PeriodicMesh, space, values: np.ndarray, m: int):
