@@ -1,7 +1,7 @@
 """What the time loop asks of a backend, what every backend shares, and how one is found.
 
 A backend knows how to build its state from a scene, take one step of a scheme, and measure
-E, W, G, V, A, ΔA (SPEC §6) on its state. It never writes files and never decides when to
+E, W, G, V, A, ΔA (model §6) on its state. It never writes files and never decides when to
 stop: that is the loop's job (:mod:`fem_ade.loop`), and the run folder is :mod:`fem_ade.runs`.
 The backends are listed in :data:`fem_ade.registry.BACKENDS`.
 """

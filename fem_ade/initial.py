@@ -11,7 +11,7 @@ gives under ``[ic]`` (``kind = "..."``), validated by :func:`ic_from_mapping`:
 kind         fields
 ===========  ==================================================================================
 ellipsoid    centre, axes, c (or c_consistent, c_printed): s = c − Σ(xᵢ − centreᵢ)²/axesᵢ
-             (the paper's, SPEC §7; not a distance)
+             (the paper's, model §7; not a distance)
 sphere       centre, radius
 torus        centre, axis (default z), R (major), r (minor): a ring of tube radius r
 spheres      centres, radii, signs (default all +1), neck (default 0): spheres joined in order;
@@ -161,7 +161,7 @@ class Shape:
 
 @dataclass(frozen=True)
 class Ellipsoid(Shape):
-    """The paper's initial conditions: s = c − q(x), q = Σ(xᵢ − centreᵢ)²/axesᵢ (SPEC §7)."""
+    """The paper's initial conditions: s = c − q(x), q = Σ(xᵢ − centreᵢ)²/axesᵢ (model §7)."""
 
     kind: ClassVar[str] = "ellipsoid"
     spec: ClassVar[dict] = {"centre": "vec", "axes": "vec", "c_consistent": "float+",

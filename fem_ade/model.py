@@ -1,4 +1,4 @@
-"""The model's parameters, the names of its effects, and their validation (SPEC §1, §2, §4).
+"""The model's parameters, the names of its effects, and their validation (model §1, §2, §4).
 
 Everything here is backend-agnostic: both the finite-element backend and the spectral
 reference read a :class:`Params` and switch terms on and off by :attr:`Params.effects`.
@@ -11,14 +11,14 @@ from dataclasses import asdict, dataclass, field, fields, replace
 
 from .registry import CONSTRAINTS, VOLUMES
 
-#: The energy terms a scene can switch on (SPEC §2). ``bending`` is always on.
+#: The energy terms a scene can switch on (model §2). ``bending`` is always on.
 EFFECTS = ("bending", "spontaneous_curvature", "ade", "volume", "area")
 
-#: Columns every backend reports, in this order (SPEC §6).
+#: Columns every backend reports, in this order (model §6).
 HISTORY_COLUMNS = ("step", "t", "E", "W", "G", "V", "A", "dA")
 
 SQRT2 = math.sqrt(2.0)
-#: A = AREA_FACTOR * B  (SPEC §2)
+#: A = AREA_FACTOR * B  (model §2)
 AREA_FACTOR = 3.0 * SQRT2 / 4.0
 
 
@@ -28,7 +28,7 @@ class ModelError(ValueError):
 
 @dataclass(frozen=True)
 class Params:
-    """Physical and numerical parameters of one simulation (SPEC §1).
+    """Physical and numerical parameters of one simulation (model §1).
 
     ``D`` defaults to 2ε/3 and ``A0`` (the area scale of G) to β. A term is evaluated only
     when its effect is in ``effects``; ``C`` is used only with ``spontaneous_curvature``.
@@ -142,7 +142,7 @@ class Params:
 
     def for_constraints(self, constraints: str) -> Params:
         """The parameters a run with ``constraints`` uses: exact constraints replace the
-        volume and area penalties, they are not added to them (SPEC §2, issue 6)."""
+        volume and area penalties, they are not added to them (model §2, issue 6)."""
         if constraints not in CONSTRAINTS:
             raise ModelError(f"unknown constraints {constraints!r}; "
                              f"valid: {', '.join(CONSTRAINTS)}")
@@ -150,7 +150,7 @@ class Params:
             return self.with_(effects=self.effects - {"volume", "area"})
         return self
 
-    # -- the scalar parts of E_M (SPEC §2): one home for both backends -------------------
+    # -- the scalar parts of E_M (model §2): one home for both backends -------------------
     # Each term below depends on φ only through one functional (V, A or ΔA), which each
     # backend computes on its own fields; its force is (slope) × (the functional's gradient).
     def volume_energy(self, V: float) -> float:
@@ -180,7 +180,7 @@ class Params:
         return 2.0 * self.M2
 
     def area_force_scale(self, A: float) -> float:
-        """c_A = (3√2/2)M₂(A − β): the area penalty's force is δT₂/δφ = −c_A f (SPEC §3)."""
+        """c_A = (3√2/2)M₂(A − β): the area penalty's force is δT₂/δφ = −c_A f (model §3)."""
         return 1.5 * SQRT2 * self.M2 * (A - self.beta)
 
     @property
@@ -193,7 +193,7 @@ class Params:
         return self.kappa_bar * math.pi / (2.0 * self.A0 * self.D**2) * (dA - self.delta_A0) ** 2
 
     def ade_force_coefficient(self, dA: float) -> float:
-        """γ = −(3κ̄π/(4A₀D))(ΔA − ΔA₀) = (dG/dΔA)·(−3D/4): the ADE force (SPEC §3) is
+        """γ = −(3κ̄π/(4A₀D))(ΔA − ΔA₀) = (dG/dΔA)·(−3D/4): the ADE force (model §3) is
         h = γ(−2φΔφ − Δ(φ²) + (1/ε²)(1 − 6φ² + 5φ⁴)), δΔA/δφ being −(3D/4) times the bracket."""
         return -0.75 * self.kappa_bar * math.pi / (self.A0 * self.D) * (dA - self.delta_A0)
 
@@ -232,13 +232,13 @@ def reduced_area_difference(dA: float, A: float, D: float) -> float:
 
 
 def max_stable_dt(params: Params) -> float:
-    """ε³/κ: beyond it the step operator 1 + Δtκ(ε|k|⁴ − (2/ε)|k|²) is singular (SPEC §4)."""
+    """ε³/κ: beyond it the step operator 1 + Δtκ(ε|k|⁴ − (2/ε)|k|²) is singular (model §4)."""
     return params.eps**3 / params.kappa
 
 
 def check_resolution(params: Params, n: int, dt: float, *, allow_underresolved: bool = False,
                      check_dt: bool = True, spacing: float | None = None, min_n: int = 8):
-    """Check the grid size n and the time step dt against the scene (SPEC §4). Raises ModelError.
+    """Check the grid size n and the time step dt against the scene (model §4). Raises ModelError.
 
     ``check_dt=False`` skips the Δt < ε³/κ bound (the stabilized scheme has no such bound).
     ``spacing``: the largest node spacing of the discretization (default L/n), which must not
@@ -255,7 +255,7 @@ def check_resolution(params: Params, n: int, dt: float, *, allow_underresolved: 
     if check_dt and dt >= limit:
         raise ModelError(
             f"dt = {dt:g} >= eps^3/kappa = {limit:g}: the semi-implicit step operator is singular "
-            "there (SPEC §4); use a smaller dt or --scheme stabilized"
+            "there (model §4); use a smaller dt or --scheme stabilized"
         )
     h = params.L / n if spacing is None else spacing
     if h > params.eps and not allow_underresolved:

@@ -9,14 +9,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-#: time schemes every backend implements (SPEC §4, §10)
+#: time schemes every backend implements (docs/model.md §4, §9)
 SCHEMES = {
-    "paper": "the paper's semi-implicit scheme (SPEC §4); needs dt < eps^3/kappa",
+    "paper": "the paper's semi-implicit scheme (docs/model.md §4); needs dt < eps^3/kappa",
     "stabilized": "linear, one solve per step, energy-stable at >= 100x the paper's dt",
 }
 
 #: initial-condition variants of a catalogue scene: the two readings of the paper's printed
-#: constant c (SPEC §7 erratum), and "seeded", the paper's figure's shape (fem_ade.seeds)
+#: constant c (docs/model.md §7), and "seeded", the paper's figure's shape (fem_ade.seeds)
 IC_VARIANTS = ("consistent", "printed", "seeded")
 
 #: how V = α and A = β are enforced
@@ -123,6 +123,6 @@ BACKENDS = {
     ),
     "spectral": BackendSpec(
         "spectral", "spectral_ref.solver:SpectralBackend",
-        "the compact Fourier-spectral reference (SPEC §6)",
+        "the compact Fourier-spectral reference (docs/model.md §6)",
     ),
 }

@@ -88,7 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--every", type=int, default=10, help="record every K steps (default 10)")
     p.add_argument("--ic", choices=IC_VARIANTS, default="consistent",
                    help="initial condition: the paper's ellipsoid with c read consistently "
-                        "(default) or as printed (SPEC §7), or seeded: the shape of the "
+                        "(default) or as printed (docs/model.md §7), or seeded: the shape of the "
                         "paper's figure, sized so that its diffuse V, A are alpha, beta")
     p.add_argument("--perturb", type=float, default=0.0,
                    help="amplitude of a smooth seeded level-set perturbation (default 0)")
@@ -143,7 +143,7 @@ def list_scenes() -> str:
     from .scenes import PAPER_SCENES, TEACHING_SCENES
 
     verdicts = gallery_verdicts()
-    lines = ["paper scenes (SPEC §7; under each, what the gallery found: studies/gallery.py, "
+    lines = ["paper scenes (docs/model.md §7; under each, what the gallery found: studies/gallery.py, "
              "variants a-d in README 'The paper's gallery'):"]
     for s in PAPER_SCENES.values():
         lines.append(f"  {s.name:16s} {s.figure:9s} eps={s.params.eps:<5g} dt={s.dt:<6g} "

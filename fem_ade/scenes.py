@@ -1,4 +1,4 @@
-"""The scene catalogue: the paper's thirteen shapes (SPEC §7) and the teaching scenes.
+"""The scene catalogue: the paper's thirteen shapes (model §7) and the teaching scenes.
 
 A scene is data plus a tiny constructor: parameters (:class:`fem_ade.model.Params`, whose
 ``effects`` say which energy terms run), the paper's time step, a default resolution, an
@@ -6,7 +6,7 @@ initial condition (:mod:`fem_ade.initial`), and the paper figure it reproduces. 
 conditions are functions of position, so that every backend evaluates them on its own points
 (grid or mesh nodes).
 
-Initial conditions of the paper (SPEC §7): u₀ = tanh((c − q(x)) / (√2 ε)),
+Initial conditions of the paper (model §7): u₀ = tanh((c − q(x)) / (√2 ε)),
 q = (x−x₀)²/a + (y−y₀)²/b + (z−z₀)²/d. The consistent reading of c (the default) makes the
 initial volume match α; the printed one (``ic="printed"``) is kept as a hard case.
 """
@@ -60,7 +60,7 @@ class Scene:
         ``perturb`` > 0 adds a smooth, seeded perturbation of the level set:
         s → s + perturb · scale · ψ(x), with ψ a random combination of the periodic Fourier
         modes of |k|∞ ≤ 2 normalised so that |ψ| ≤ 1. It breaks symmetries without adding
-        grid-scale noise (which the paper's scheme does not survive, SPEC §7). A field (kind
+        grid-scale noise (which the paper's scheme does not survive, model §7). A field (kind
         "file") is perturbed the same way through its level set s = √2ε artanh φ.
         """
         if ic not in IC_VARIANTS:
@@ -212,7 +212,7 @@ _PAPER = [
 
 
 def sphere_values(R: float, eps: float, D: float) -> dict:
-    """Diffuse volume, area and area difference of tanh((R − r)/(√2ε)) as h → 0 (SPEC §8)."""
+    """Diffuse volume, area and area difference of tanh((R − r)/(√2ε)) as h → 0 (model §8)."""
     return {
         "V": 4.0 * math.pi * R**3 / 3.0 + (2.0 * math.pi**3 / 3.0) * R * eps**2,
         "A": 4.0 * math.pi * (R**2 + (math.pi**2 - 6.0) * eps**2 / 6.0),
@@ -226,7 +226,7 @@ def _sphere(name, effects, desc):
     sv = sphere_values(R, eps, 2.0 * eps / 3.0)
     params = Params(eps=eps, alpha=sv["V"], beta=sv["A"], delta_A0=sv["dA"], effects=effects)
     ic = Sphere(_C, radius=R)
-    return Scene(name, params, 5e-7, ic, n=48, figure="SPEC §8", description=desc,
+    return Scene(name, params, 5e-7, ic, n=48, figure="model §8", description=desc,
                  shape="sphere")
 
 

@@ -14,7 +14,7 @@ spectral backend: this module, a catalogue the scenes read, imports no backend) 
 Five scenes have no seed: at ε = 0.05 (``biconcave``, the gourds, ``cylinder``) no disc, pair
 of beads or capsule with equilibrium profiles has both: with diffuse V = α its diffuse area is
 at most 0.55–0.64 β (scanned on their families at n = 48), because the interface, 0.4 of the
-radius, carries most of the diffuse volume (SPEC §7).
+radius, carries most of the diffuse volume (model §7).
 """
 
 from __future__ import annotations

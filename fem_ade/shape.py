@@ -6,7 +6,7 @@ and reduced area difference, and how many arms (lobes) the largest surface has.
 :func:`extract_surface` returns the triangulated surface itself (used by
 :mod:`fem_ade.render`).
 
-Grid convention (SPEC §6): ``phi[i, j, k]`` is φ at (i, j, k)·h, h = L/n, periodic with
+Grid convention (model §6): ``phi[i, j, k]`` is φ at (i, j, k)·h, h = L/n, periodic with
 period L in each direction.
 
 How the surface is extracted
@@ -14,7 +14,7 @@ How the surface is extracted
 1. **Centring.** A grid layer (a plane i = const, etc.) is *free* if φ has one sign on all of
    it, so that no part of the surface crosses it. Along each axis the field is rolled so that
    the middle of the longest (circular) run of free layers becomes the box face. For the
-   centred SPEC scenes the roll is zero; a vesicle placed across the periodic boundary is
+   centred paper scenes the roll is zero; a vesicle placed across the periodic boundary is
    moved back in one piece. The surface coordinates are then "unwrapped" physical
    coordinates in the box [s·h, s·h + L] (s the roll, reported as ``shift``).
 2. **Periodic closing.** The rolled field is padded periodically by one layer (n + 1 points
@@ -42,7 +42,7 @@ Descriptors
   (θ_e the signed dihedral angle), so that the sharp m = ∫H dA / (4π√(A/4π)) needs no D.
   A sphere has v = m = 1. The sharp values are always reported too, under ``sharp``.
   Mixing diffuse and sharp values is not like with like: the diffuse V of a sphere exceeds
-  the sharp one by 12.6 % at ε/R = 0.16 (SPEC §8).
+  the sharp one by 12.6 % at ε/R = 0.16 (model §8).
 * ``arms``: the number of lobes of the largest component, see :func:`count_arms`.
   Convention: a body without arms (sphere, ellipsoid, discocyte, torus) has **1** lobe; a
   three-armed starfish 3, a six-armed one 6.

@@ -1,4 +1,4 @@
-"""spectral_ref: a compact, independent Fourier-spectral reference solver (SPEC §2–§4, §6)."""
+"""spectral_ref: a compact, independent Fourier-spectral reference solver (model §2–§4, §6)."""
 
 from .solver import SpectralBackend
 

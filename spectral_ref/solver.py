@@ -1,4 +1,4 @@
-"""A compact Fourier-spectral reference for the ADE phase-field model (SPEC §2–§4, §6).
+"""A compact Fourier-spectral reference for the ADE phase-field model (model §2–§4, §6).
 
 Written straight from the formulas, independently of the finite-element physics, so that
 the two backends cross-check each other. It shares with the FEM only the scene catalogue and
@@ -6,10 +6,10 @@ its parameters (the scalar parts of E_M in :class:`fem_ade.model.Params`), and g
 that holds no physics (the backend base with the constraints' target ramp, output meshes):
 its energy terms, forces, stabilization and constraint multipliers are its own.
 
-Conventions (SPEC §6): grid x_j = jL/n in each direction; derivatives by FFT (``rfftn``);
+Conventions (model §6): grid x_j = jL/n in each direction; derivatives by FFT (``rfftn``);
 integrals by the rectangle rule h^d Σ; no dealiasing.
 
-One step of the semi-implicit scheme (SPEC §4)::
+One step of the semi-implicit scheme (model §4)::
 
     φ̂ⁿ⁺¹ = (φ̂ⁿ/Δt − R̂ⁿ) / (1/Δt + κ(ε|k|⁴ − (2/ε)|k|²))
     Rⁿ   = κN(φⁿ) + h(φⁿ) + M₁(Vⁿ − α) − (3√2/2) M₂ (Aⁿ − β) f(φⁿ)
@@ -45,13 +45,13 @@ def wavenumbers_squared(n: int, L: float, dim: int) -> np.ndarray:
 
 # --- the energy terms, one function each (the names are what tests count) ----------------
 def bending_energy(phi, lap, p, dV):
-    """W = (κ/2ε) ∫ f_c², f_c = εΔφ − (1/ε)(φ² − 1)(φ + Cε)   (SPEC §2)."""
+    """W = (κ/2ε) ∫ f_c², f_c = εΔφ − (1/ε)(φ² − 1)(φ + Cε)   (model §2)."""
     fc = p.eps * lap - (phi * phi - 1.0) * (phi + p.C_eff * p.eps) / p.eps
     return p.kappa / (2.0 * p.eps) * dV * np.sum(fc * fc)
 
 
 def bending_force_explicit(phi, lap, p):
-    """κN(φ) of SPEC §4 as (P, Q), κN = P + ΔQ:
+    """κN(φ) of model §4 as (P, Q), κN = P + ΔQ:
 
     N = −(1/ε)Δ(φ³) − CΔ(φ²) − (3/ε)φ²Δφ − 2CφΔφ + (1/ε³)(3φ² + 2Cεφ − 1)(φ² − 1)(φ + Cε).
     """
@@ -93,7 +93,7 @@ def area_gradient(phi, lap, p):
 
 
 def area_difference(phi, lap, p, dV):
-    """ΔA = −(3D/4) ∫ (1 − φ²)Δφ + (1/ε²) φ(1 − φ²)²   (SPEC §2, paper 2.6)."""
+    """ΔA = −(3D/4) ∫ (1 − φ²)Δφ + (1/ε²) φ(1 − φ²)²   (model §2, paper 2.6)."""
     one_m = 1.0 - phi * phi
     return -0.75 * p.D * dV * np.sum(one_m * lap + phi * one_m * one_m / p.eps**2)
 
@@ -102,7 +102,7 @@ def area_difference_gradient(phi, lap, eps, coef):
     """coef·(−2φΔφ − Δ(φ²) + (1/ε²)(1 − 6φ² + 5φ⁴)) as (P, Q), the sum being P + ΔQ.
 
     coef = −3D/4 gives δΔA/δφ; coef = γ (``Params.ade_force_coefficient``) the ADE force
-    h = δG/δφ of SPEC §3.
+    h = δG/δφ of model §3.
     """
     phi2 = phi * phi
     P = coef * (-2.0 * phi * lap + (1.0 - 6.0 * phi2 + 5.0 * phi2 * phi2) / eps**2)
@@ -111,7 +111,7 @@ def area_difference_gradient(phi, lap, eps, coef):
 
 
 def stabilization(p, A, dA, V):
-    """(s₀, s₂) of the large-step scheme (SPEC §10): the Lipschitz bounds of the explicit
+    """(s₀, s₂) of the large-step scheme (model §9): the Lipschitz bounds of the explicit
     terms' linearisations for |φ| ≤ 1 — bending 8κ/ε³ and 6κ/ε; the area penalty's force
     c_A f, c_A = (3√2/2)M₂(A − β): 2|c_A|/ε and |c_A|ε; the ADE force, c_G =
     (3κ̄π/(4A₀D))(ΔA − ΔA₀): 8|c_G|/ε² and 4|c_G|; the localized volume penalty:
@@ -174,7 +174,7 @@ def newton_multipliers(measure, alpha, beta, tol=1e-10, maxit=30):
 
 
 def stabilization_symbol(k2, p, s0, s2, dim):
-    """The diagonal part S of the large-step scheme, added as S(φⁿ⁺¹ − φⁿ) (SPEC §10).
+    """The diagonal part S of the large-step scheme, added as S(φⁿ⁺¹ − φⁿ) (model §9).
 
     S = s₀ + s₂|k|² (:func:`stabilization`) + σ_V δ_k0, where
     σ_V = 2M₁·(½)²|Ω| = M₁|Ω|/2 is the paper's volume penalty's rank-one Hessian (g_V = ½),
@@ -217,7 +217,7 @@ class SpectralBackend(BackendBase):
             self.set_dt(dt)
 
     def set_dt(self, dt: float) -> None:
-        """Set Δt; the implicit symbol of SPEC §4 is 1/Δt + κ(ε|k|⁴ − (2/ε)|k|²)."""
+        """Set Δt; the implicit symbol of model §4 is 1/Δt + κ(ε|k|⁴ − (2/ε)|k|²)."""
         if dt == self.dt:
             return
         p = self.params
@@ -323,7 +323,7 @@ class SpectralBackend(BackendBase):
     def _step_solver(self, A, dA, V=None):
         """P⁻¹ of this step: δ = φⁿ⁺¹ − φⁿ solves P δ = −Rⁿ − 𝓛φⁿ, 𝓛 = κ(εΔ² + (2/ε)Δ).
 
-        The paper's scheme: P = 1/Δt + 𝓛 (diagonal). The large-step scheme (SPEC §10 recipe,
+        The paper's scheme: P = 1/Δt + 𝓛 (diagonal). The large-step scheme (model §9 recipe,
         made concrete): P = 1/Δt + 𝓛 + S + Σᵢ σᵢ gᵢ⟨gᵢ, ·⟩, S the diagonal of
         :func:`stabilization_symbol`, the rank-one terms the Hessians of the penalties: area
         σ = 2M₂ with g = δA/δφ, ADE σ = κ̄π/(A₀D²) with g = δΔA/δφ, the localized volume

@@ -1,4 +1,4 @@
-"""Effects: a term a scene leaves off is never evaluated and reports 0 (SPEC §2)."""
+"""Effects: a term a scene leaves off is never evaluated and reports 0 (model §2)."""
 
 import numpy as np
 import pytest

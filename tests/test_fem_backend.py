@@ -1,5 +1,5 @@
 """The FEM backend as the driver sees it (fem_ade.backend.Backend): protocol, state, effects,
-Krylov iteration counts, energy decay and the SPEC §8 sphere values."""
+Krylov iteration counts, energy decay and the model §8 sphere values."""
 
 import json
 import math

@@ -1,4 +1,4 @@
-"""Periodic meshes (SPEC §5): graded and file meshes give the uniform answer to within the
+"""Periodic meshes (model §5): graded and file meshes give the uniform answer to within the
 discretisation error; bad mesh files raise ModelError with one clear line."""
 
 import sys
@@ -19,7 +19,7 @@ import make_meshes  # noqa: E402
 
 
 def _scene():
-    """The SPEC §8 sphere under bending only, with a wide interface so 12 cells resolve it."""
+    """The model §8 sphere under bending only, with a wide interface so 12 cells resolve it."""
     return get_scene("sphere-bending").with_(eps=0.08, D=2 * 0.08 / 3)
 
 

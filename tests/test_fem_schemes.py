@@ -1,4 +1,4 @@
-"""The FEM runs the spectral reference's schemes: the stabilized large-step scheme (SPEC §10)
+"""The FEM runs the spectral reference's schemes: the stabilized large-step scheme (model §9)
 and exact constraints by multipliers inside the step (fem_ade.constraints)."""
 
 import numpy as np

@@ -1,6 +1,6 @@
-"""An independent, naive implementation of SPEC §2-§4, §6, §7, compared with the CLI.
+"""An independent, naive implementation of model §2-§4, §6, §7, compared with the CLI.
 
-Written straight from the formulas of /work/shared/SPEC.md, without reading or importing the
+Written straight from the formulas of docs/model.md, without reading or importing the
 physics code of ``fem_ade`` or ``spectral_ref``: the package is used only as a black box through
 ``python -m fem_ade.run``. Deliberately naive: full complex FFTs (``numpy.fft.fftn/ifftn``), every
 Laplacian computed by its own transform, no reuse of spectra between terms.
@@ -18,7 +18,7 @@ SQ2 = np.sqrt(2.0)
 
 
 class NaiveADE:
-    """SPEC §2 energy, §3 variational derivatives, §4 semi-implicit step, §6 conventions."""
+    """model §2 energy, §3 variational derivatives, §4 semi-implicit step, §6 conventions."""
 
     def __init__(self, n, L, eps, dt, alpha, beta, dA0, kappa=1.0, kbar=1.4, M1=1e5, M2=1e4,
                  C=0.0, D=None, A0=None):

@@ -1,4 +1,4 @@
-"""The scene catalogue (SPEC §7), TOML scene files and the smooth perturbation."""
+"""The scene catalogue (model §7), TOML scene files and the smooth perturbation."""
 
 import math
 
@@ -25,7 +25,7 @@ def test_catalogue_has_the_thirteen_paper_scenes_and_teaching_scenes():
 
 @pytest.mark.parametrize("name", PAPER_NAMES)
 def test_consistent_initial_volume_matches_alpha(name):
-    """SPEC §7 erratum: the consistent c gives a sharp volume within 5 % of α.
+    """model §7 erratum: the consistent c gives a sharp volume within 5 % of α.
 
     Experiments 2 and 8 start from the same sphere (volume 0.0835) and deflate to α by design.
     """

@@ -1,4 +1,4 @@
-"""The spectral reference: energy decay and self-convergence (SPEC §4, §6, §8)."""
+"""The spectral reference: energy decay and self-convergence (model §4, §6, §8)."""
 
 import numpy as np
 

@@ -1,8 +1,8 @@
-"""The weak forms of the mixed scheme (SPEC §2–§5): every functional and its gradient, once.
+"""The weak forms of the mixed scheme (model §2–§5): every functional and its gradient, once.
 
 Implicit side (assembled once per run): ``mass`` (φ, v) and ``laplace`` (∇φ, ∇v).
 
-Functionals (SPEC §2) on nodal fields. Integrals of nonlinear expressions are exact integrals
+Functionals (model §2) on nodal fields. Integrals of nonlinear expressions are exact integrals
 of their nodal interpolants, ∫ I(F) = Σᵢ wᵢ F(φᵢ) with w = M·1 (the trapezoid rule for
 uniform Q1, Simpson/Gauss–Lobatto for tensor Q2); the gradient integrals are exact,
 ∫|∇φ|² = φᵀKφ and ∫ (1 − φ²)Δφ = (φ²)ᵀKφ; μ = M_L⁻¹Kφ stands for −Δφ.
@@ -12,7 +12,7 @@ Gradients ⟨δQ/δφ, v⟩ as functionals with nodal products: each ``*_gradien
 is one sparse product. A gradient times the slope of its term in E_M (``Params.*_slope``,
 ``Params.ade_force_coefficient``) is that term's force; the same gradient is the vector b of
 the term's rank-one Hessian σbbᵀ in the stabilized scheme and the direction of the exact
-constraints. The explicit part of the bending force, κN(φ) of SPEC §4, is
+constraints. The explicit part of the bending force, κN(φ) of model §4, is
 :func:`bending_explicit`.
 
 ``*_form``: the same explicit terms integrated at quadrature points (scikit-fem LinearForms),
@@ -34,18 +34,18 @@ from .solve import _dot
 # ---------------------------------------------------------------------------------------------
 @BilinearForm
 def mass(u, v, w):
-    """(u, v): the mass matrix M of SPEC §5."""
+    """(u, v): the mass matrix M of model §5."""
     return u * v
 
 
 @BilinearForm
 def laplace(u, v, w):
-    """(∇u, ∇v): the stiffness matrix K of SPEC §5 (−Δ in weak form)."""
+    """(∇u, ∇v): the stiffness matrix K of model §5 (−Δ in weak form)."""
     return dot(grad(u), grad(v))
 
 
 # ---------------------------------------------------------------------------------------------
-# the functionals of SPEC §2
+# the functionals of model §2
 # ---------------------------------------------------------------------------------------------
 def volume(phi, weights, localized=False) -> float:
     """V = ∫ (φ + 1)/2 (the paper's), or ∫ s(φ), s = (2 + 3φ − φ³)/4 (``localized``)."""
@@ -88,7 +88,7 @@ def volume_gradient(phi, localized=False):
 def area_gradient(phi, eps, coef=AREA_FACTOR):
     """coef·[ε(∇φ, ∇v) + (1/ε)((φ² − 1)φ, v)]: ⟨δA/δφ, v⟩ for coef = 3√2/4, and the area
     penalty's force −(3√2/2)M₂(A − β)⟨f, v⟩ for coef = ``Params.area_force_scale(A)``
-    (f = εΔφ − (1/ε)(φ² − 1)φ, SPEC §3).
+    (f = εΔφ − (1/ε)(φ² − 1)φ, model §3).
 
     Returns (s, c): the K part is s·φ (a multiple of φ, so callers reuse Kφ).
     """
@@ -100,7 +100,7 @@ def area_difference_gradient(phi, mu, eps, coef):
     = coef·[(2φμ, v) + (∇φ², ∇v) + (1/ε²)(1 − 6φ² + 5φ⁴, v)].
 
     coef = −3D/4 gives ⟨δΔA/δφ, v⟩; coef = γ (``Params.ade_force_coefficient``) the ADE
-    force ⟨h(φ), v⟩ of SPEC §3.
+    force ⟨h(φ), v⟩ of model §3.
     """
     phi2 = phi * phi
     a = coef * phi2
@@ -109,7 +109,7 @@ def area_difference_gradient(phi, mu, eps, coef):
 
 
 def bending_explicit(phi, mu, *, kappa, eps, C):
-    """κ⟨N(φ), v⟩ (SPEC §4), N(φ) = −(1/ε)Δ(φ³) − CΔ(φ²) − (3/ε)φ²Δφ − 2CφΔφ + (1/ε³)P(φ).
+    """κ⟨N(φ), v⟩ (model §4), N(φ) = −(1/ε)Δ(φ³) − CΔ(φ²) − (3/ε)φ²Δφ − 2CφΔφ + (1/ε³)P(φ).
 
     Weak form: (1/ε)(∇φ³, ∇v) + C(∇φ², ∇v) + ((3/ε)φ²μ + 2Cφμ + (1/ε³)P(φ), v),
     P(φ) = (3φ² + 2Cεφ − 1)(φ² − 1)(φ + Cε), μ = −Δφ.
@@ -129,7 +129,7 @@ def bending_explicit(phi, mu, *, kappa, eps, C):
 # ---------------------------------------------------------------------------------------------
 @LinearForm
 def bending_explicit_form(v, w):
-    """κ⟨N(φ), v⟩ at quadrature points (SPEC §4–§5); ∇(φ³) = 3φ²∇φ, ∇(φ²) = 2φ∇φ."""
+    """κ⟨N(φ), v⟩ at quadrature points (model §4–§5); ∇(φ³) = 3φ²∇φ, ∇(φ²) = 2φ∇φ."""
     phi, mu, eps, C = w.phi, w.mu, w.eps, w.C
     flux = (3.0 / eps * phi**2 + 2.0 * C * phi) * dot(grad(phi), grad(v))
     P = (3.0 * phi**2 + 2.0 * C * eps * phi - 1.0) * (phi**2 - 1.0) * (phi + C * eps)

@@ -1,4 +1,4 @@
-"""Periodic hexahedral (3D) and quadrilateral (2D) meshes of the box [0, L]^dim (SPEC §1, §5).
+"""Periodic hexahedral (3D) and quadrilateral (2D) meshes of the box [0, L]^dim (model §1, §5).
 
 Three kinds:
 

@@ -3,7 +3,7 @@ r"""The paper's semi-implicit step for the bending energy, solved by PCG with an
 Equation
 --------
 The Allen–Cahn flow of the bending energy W = (κ/2ε) ∫ f_c², f_c = εΔφ − (1/ε)(φ² − 1)φ
-(SPEC §2–§3, C = 0), on the periodic square, from a circle φ₀ = tanh((R − r)/(√2ε)):
+(model §2–§3, C = 0), on the periodic square, from a circle φ₀ = tanh((R − r)/(√2ε)):
 
     φ_t = −κ g,    g = εΔ²φ + (2/ε)Δφ + N(φ),
     N(φ) = −(1/ε)Δ(φ³) − (3/ε)φ²Δφ + (1/ε³)(3φ² − 1)(φ² − 1)φ.
@@ -12,7 +12,7 @@ Operator split
 --------------
 μ = −Δφ, so εΔ²φ + (2/ε)Δφ = −εΔμ − (2/ε)μ and φ²Δφ = −φ²μ.
 
-Weak form (SPEC §5)
+Weak form (model §5)
 -------------------
 Find (φ, μ) in Q1 × Q1 with, for all (v, q),
 
@@ -22,7 +22,7 @@ Find (φ, μ) in Q1 × Q1 with, for all (v, q),
 
 nonlinear products interpolated at the nodes.
 
-Time discretisation (SPEC §4)
+Time discretisation (model §4)
 -----------------------------
 Only the constant-coefficient part εΔ² + (2/ε)Δ is implicit, N is explicit:
 (φⁿ⁺¹ − φⁿ)/Δt + κ(εΔ²φⁿ⁺¹ + (2/ε)Δφⁿ⁺¹) = −κN(φⁿ). It is solvable for Δt < ε³/κ, and

@@ -6,7 +6,7 @@ The bending flow of ex02, φ_t = −κ(εΔ²φ + (2/ε)Δφ + N(φ)), with μ =
 
 Time discretisation and weak form
 ---------------------------------
-The semi-implicit step (SPEC §4–§5), with μ eliminated by the lumped mass M_L, is
+The semi-implicit step (model §4–§5), with μ eliminated by the lumped mass M_L, is
 
     S φⁿ⁺¹ = M φⁿ/Δt − κ N_h(φⁿ),    S = M/Δt + B,    B = κ(ε K M_L⁻¹ K − (2/ε) K).
 

@@ -2,14 +2,14 @@ r"""A 2D vesicle through the package API: the same model, the spectral and the F
 
 Equation
 --------
-The gradient flow of E_M = W + M₁(V − α)² + M₂(A − β)² (SPEC §2–§3 with the effects
+The gradient flow of E_M = W + M₁(V − α)² + M₂(A − β)² (model §2–§3 with the effects
 "bending", "volume", "area"; no ADE): φ_t = −(κg + M₁(V − α) − (3√2/2)M₂(A − β)f).
 In 2D, V is the enclosed area and A the perimeter.
 
 Operator split, weak form, time discretisation
 ----------------------------------------------
-The package does what ex01–ex03 show by hand: μ = −Δφ, the mixed weak form of SPEC §5,
-the semi-implicit step of SPEC §4 (only εΔ² + (2/ε)Δ implicit, penalties explicit), and
+The package does what ex01–ex03 show by hand: μ = −Δφ, the mixed weak form of model §5,
+the semi-implicit step of model §4 (only εΔ² + (2/ε)Δ implicit, penalties explicit), and
 the same step as a Fourier multiplier in the spectral reference.
 
 Parameters
