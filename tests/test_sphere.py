@@ -12,7 +12,8 @@ def test_sphere_values_match_spec_8():
 
     The h → 0 formulas of model §8 drop terms of relative size O((ε/R)⁴) ≈ 7e-4 in V (measured
     3e-5) and exponentially small terms in A, ΔA, W; the grid error at n = 48 is below 1e-7.
-    Tolerances: V 2e-4, A 1e-5, ΔA 1e-5, W 1e-4; the measured digits of docs/model.md §8 are a second check.
+    Tolerances: V 2e-4, A 1e-5, ΔA 1e-5, W 1e-4; the measured digits of docs/model.md §8
+    are a second check.
     """
     scene = get_scene("sphere")
     d = SpectralBackend(scene, n=48, dt=scene.dt).diagnostics()
