@@ -149,6 +149,46 @@ def _guard(backend: Backend) -> str | None:
     return None
 
 
+class _Progress:
+    """The progress bar: steps done of ``--steps``; toward a steady state, how far the
+    criterion has come — log₁₀ of the relative energy change per step, from its first
+    measured value to the tolerance, as a percentage — with tqdm's rate-based ETA and the
+    step, E and the change beside it (a bar to the step cap would show 1 % of a run that is
+    nearly done)."""
+
+    def __init__(self, total: int, start: int, until_steady: float | None, quiet: bool,
+                 label: str):
+        self.tol, self.first = until_steady, None
+        if until_steady is None:
+            self.bar = tqdm(total=total, initial=start, disable=quiet, desc=label or "run",
+                            unit="step", mininterval=0.5, dynamic_ncols=True)
+        else:
+            self.bar = tqdm(total=100, disable=quiet, desc=f"{label or 'run'} to steady",
+                            unit="%", mininterval=0.5, dynamic_ncols=True,
+                            bar_format="{l_bar}{bar}| {n:.0f}/100 [{elapsed}<{remaining}"
+                                       "{postfix}]")
+
+    def step(self) -> None:
+        if self.tol is None:
+            self.bar.update(1)
+
+    def record(self, k: int, t: float, E: float, change: float | None) -> None:
+        if self.tol is None:
+            self.bar.set_postfix(t=f"{t:.3g}", E=f"{E:.6g}", refresh=False)
+            return
+        if change is not None and change > 0 and math.isfinite(change):
+            if self.first is None:
+                self.first = max(change, 10.0 * self.tol)
+            span = math.log10(self.first) - math.log10(self.tol)
+            done = (math.log10(self.first) - math.log10(change)) / span if span > 0 else 1.0
+            self.bar.update(100.0 * min(max(done, 0.0), 1.0) - self.bar.n)
+        self.bar.set_postfix(step=k, E=f"{E:.8g}",
+                             change="—" if change is None else f"{change:.2g}", refresh=False)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
 def run_loop(
     backend: Backend,
     *,
@@ -219,8 +259,7 @@ def run_loop(
         observe(ls)
     last_diag, last_recorded_E = diag, ls.last_E
     status, message = "completed", ""
-    bar = tqdm(total=total, initial=ls.k, disable=quiet, desc=label or "run", unit="step",
-               mininterval=0.5, dynamic_ncols=True)
+    bar = _Progress(total, ls.k, until_steady, quiet, label)
     good, good_k = None, None
     try:
         while ls.k < total:
@@ -268,7 +307,7 @@ def run_loop(
             ls.k += 1
             ls.t += ls.dt
             ls.extra = {**ls.extra, **extra}
-            bar.update(1)
+            bar.step()
             if accelerate:
                 ls.anchor, ls.momentum_t, ls.last_E = good, t_next, diag["E"]
             if adaptive is not None:
@@ -281,10 +320,12 @@ def run_loop(
             if is_record:
                 record(diag)
                 last_diag = diag
-                bar.set_postfix(t=f"{ls.t:.3g}", E=f"{diag['E']:.6g}", refresh=False)
+                change = None
                 if until_steady is not None and ls.k % every == 0:
                     scale = every * max(abs(diag["E"]), 1e-300)
                     change = abs(diag["E"] - last_recorded_E) / scale
+                bar.record(ls.k, ls.t, diag["E"], change)
+                if change is not None:
                     if change < until_steady:
                         status = "steady"
                         message = (f"steady at step {ls.k}: relative energy change per step "

@@ -349,9 +349,10 @@ def _unwrap_y(S: Surface, y: float) -> float:
 
 # --- history ---------------------------------------------------------------------------
 def render_history(history, path: str | Path, params: Params, *,
-                   title: str | None = None) -> Path:
+                   title: str | None = None, physical_time: bool = True) -> Path:
     """Write ``history.png``: energies (left; log scale when the parts differ by more than a
-    factor 20) and V/α, A/β, ΔA/ΔA₀ (right) against t.
+    factor 20) and V/α, A/β, ΔA/ΔA₀ (right) against t — or against the iteration when t is
+    not a physical time (``physical_time`` False: a run with momentum).
 
     ``history``: the columns of ``history.csv`` (a dict of arrays, or the file's path).
     E, W, G are read; T₁ = M₁(V − α)², T₂ = M₂(A − β)² are computed from V, A when their
@@ -366,7 +367,9 @@ def render_history(history, path: str | Path, params: Params, *,
     if "t" not in hist or len(hist["t"]) == 0:
         raise ValueError("the history has no rows")
     hist = {k: np.asarray(v, dtype=float) for k, v in hist.items()}
-    t = hist["t"]
+    t = hist["t"] if physical_time or "step" not in hist else hist["step"]
+    xlabel = "t" if physical_time or "step" not in hist else \
+        "iteration (momentum: t is not a physical time)"
     alpha, beta, delta_A0 = params.alpha, params.beta, params.delta_A0
     parts = {"E": hist.get("E"), "W": hist.get("W"), "G": hist.get("G")}
     if params.on("volume") and "V" in hist:
@@ -393,7 +396,7 @@ def render_history(history, path: str | Path, params: Params, *,
         ax1.set_yscale("log")  # parts of very different sizes
     else:
         ax1.ticklabel_format(axis="y", useOffset=False)
-    ax1.set_xlabel("t")
+    ax1.set_xlabel(xlabel)
     ax1.set_ylabel("energy")
     ax1.set_title("energy and its parts")
     ax1.legend(fontsize=9, loc="best")
@@ -410,7 +413,7 @@ def render_history(history, path: str | Path, params: Params, *,
         ax2.plot(t, v, color=colour, lw=1.8, label=label,
                  marker="o" if len(t) < 15 else None, ms=3)
     ax2.axhline(1.0, color="0.4", lw=1.0, ls="--", label="target")
-    ax2.set_xlabel("t")
+    ax2.set_xlabel(xlabel)
     ax2.set_ylabel("ratio to target")
     ax2.set_title("volume, area and area difference")
     ax2.legend(fontsize=9, loc="best")
@@ -518,13 +521,16 @@ def render_run(out: str | Path, *, view: tuple[float, float] = DEFAULT_VIEW,
         desc = describe(phi, L, V=final.get("V"), A=final.get("A"),
                         dA=final.get("dA") if params.on("ade") else None, D=params.D)
     return draw_run(out, phi, params, history, desc, label=run_label(summary, phi.shape[0]),
-                    view=view, size=size, engine=engine, quiet=quiet)
+                    view=view, size=size, engine=engine, quiet=quiet,
+                    physical_time=not summary.get("accelerate", False))
 
 
 def run_label(summary: dict, n_grid: int) -> str:
     """The title of a run's pictures: scene, backend, grid, time, and a divergence if any."""
     steps, t = summary.get("steps"), summary.get("t")
     when = f"t = {t:.3g} ({steps} steps)" if isinstance(t, (int, float)) else ""
+    if summary.get("accelerate"):  # momentum: t is not a physical time
+        when = f"{steps} iterations (momentum)"
     status = summary.get("status")
     flag = "DIVERGED: last finite state" if status == "diverged" else (
         "interrupted" if status == "interrupted" else "")
@@ -539,14 +545,16 @@ def run_label(summary: dict, n_grid: int) -> str:
 def draw_run(out: str | Path, phi: np.ndarray, params: Params, history,
              descriptors: dict | None, *, label: str, surface: Surface | None = None,
              view: tuple[float, float] = DEFAULT_VIEW, size: tuple[int, int] = (1200, 600),
-             engine: str = "auto", quiet: bool = True) -> dict | None:
+             engine: str = "auto", quiet: bool = True,
+             physical_time: bool = True) -> dict | None:
     """Write ``OUT/shape.png`` and ``OUT/history.png`` from what a run has in memory: φ on the
     uniform grid, the parameters, the history columns and the descriptors (and the surface,
     if extracted already; 2D runs: the field and its zero contour). Returns the descriptors."""
     out = Path(out)
     if np.ndim(phi) == 2:
         render_field_2d(phi, params.L, out / "shape.png", title=label)
-        render_history(history, out / "history.png", params, title=label)
+        render_history(history, out / "history.png", params, title=label,
+                       physical_time=physical_time)
         return descriptors
     subtitle = summary_line(descriptors, given="diffuse, from the diagnostics")
     v0, m0 = params.reduced_targets()
@@ -555,7 +563,8 @@ def draw_run(out: str | Path, phi: np.ndarray, params: Params, history,
                  + (f", Δa = {m0:.3f}" if ade else ""))
     render_shape(phi, params.L, out / "shape.png", title=label, view=view, size=size,
                  engine=engine, descriptors=descriptors, subtitle=subtitle, surface=surface)
-    render_history(history, out / "history.png", params, title=label)
+    render_history(history, out / "history.png", params, title=label,
+                   physical_time=physical_time)
     if not quiet:
         print(f"{label}: " + subtitle.replace("\n", "; "))
         print(f"wrote {out / 'shape.png'} and {out / 'history.png'}")

@@ -674,7 +674,8 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict, series, gri
         columns = {c: np.array([float(r.get(c, 0.0)) for r in rows]) for c in rows[0]}
         try:
             draw_run(out, phi_grid, be.scene.params, columns, descriptors, surface=surface,
-                     label=run_label(summary, phi_grid.shape[0]))
+                     label=run_label(summary, phi_grid.shape[0]),
+                     physical_time=not config.get("accelerate", False))
         except Exception as err:  # noqa: BLE001 (a picture must never cost the run's results)
             warnings.warn(f"rendering {out} failed: {err}; the run's results are saved",
                           stacklevel=2)

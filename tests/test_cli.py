@@ -152,3 +152,21 @@ def test_existing_out_dir(cli, tmp_path):
              "--force", "--quiet", "--no-render"])
     assert r.returncode == 0, r.stderr
     assert (out / "keep.txt").read_text() == "precious" and (out / "history.csv").exists()
+
+
+def test_progress_toward_a_steady_state_tells_the_truth(cli, tmp_path):
+    """Toward a steady state the bar follows the criterion (log10 of the energy change per
+    step, from its first value to the tolerance), not the 20000-step cap: it ends at 100/100
+    and shows the change; the pictures' time axis is the iteration (momentum)."""
+    from fem_ade.render import run_label
+
+    out = tmp_path / "S"
+    r = cli(["discocyte", "--recipe", "steady", "--order", "4", "--n", "4",
+             "--allow-underresolved", "--out", out, "--no-render"])
+    assert r.returncode == 0, r.stderr
+    frames = r.stderr.replace("\r", "\n").splitlines()
+    bars = [f for f in frames if "to steady" in f]
+    assert bars and "100/100" in bars[-1] and "change=" in bars[-1], bars[-3:]
+    assert not any("/20000" in f for f in frames)
+    summary = json.loads((out / "summary.json").read_text())
+    assert "iterations (momentum)" in run_label(summary, 16)
