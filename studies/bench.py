@@ -7,7 +7,8 @@ wall time per step (medians over ``--repeats`` steps after two warm-up steps), o
 ``discocyte`` (experiment 1), at 64³ nodes — the spectral grid n = 64 and the FEM of order p
 with n = 64/p cells per axis — for every order on uniform and graded meshes, with the exact
 solve (fast diagonalization; the FFT for p = 1 uniform) and with PCG + AMG on the low-order
-refined operator. Writes ``studies/results/bench.json`` — every figure as
+refined operator. Writes ``OUT/bench.json`` (``--out``, default ``runs/studies``; the
+committed figures: ``--out studies/results``) — every figure as
 ``{"value", "unit", "target", "op"}`` (``target`` null where there is none) — and prints the
 table. ``--quick``: small grids, no 128³, no steady states (the test suite runs it; nothing
 there is timed).
@@ -36,7 +37,7 @@ import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-OUT = Path(__file__).resolve().parent / "results"
+OUT = Path("runs") / "studies"  # the committed figures: --out studies/results
 SCENE = "discocyte"
 ORDERS = (1, 2, 3, 4, 6, 8)
 

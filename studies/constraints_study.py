@@ -757,7 +757,8 @@ def write_report(out_root: Path, scenes, variants) -> Path:
 def main(argv=None) -> list[dict]:
     """Run the study (see the module docstring); return the cases run (their case.json)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", default="studies/results", help="results root (default %(default)s)")
+    ap.add_argument("--out", default="runs/studies",
+                    help="results root (default %(default)s; the committed: studies/results)")
     ap.add_argument(
         "--quick", action="store_true", help="tiny smoke run: discocyte, n = 16, 20 steps (< 30 s)"
     )

@@ -29,8 +29,8 @@ and loop) and wall time. Times are one thread: this script sets ``OPENBLAS_NUM_T
 ``FEM_ADE_FFT_WORKERS=1`` unless they are set. ``studies/cost.py`` reads the rows.
 
 Writes ``convergence.json``, ``convergence.md`` and ``convergence-*.png`` into ``--out``
-(default ``studies/results``), the start folders under ``--runs`` (default
-``runs/convergence``). The full run takes about an hour on 2 cores; ``--quick`` (the test
+(default ``runs/studies``; the committed results: ``--out studies/results``), the start
+folders under ``--runs`` (default ``runs/convergence``). The full run takes about an hour on 2 cores; ``--quick`` (the test
 suite) seconds.
 
     python studies/convergence.py [--parts spatial steady temporal] [--scenes discocyte]
@@ -51,7 +51,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-OUT = Path(__file__).resolve().parent / "results"
+OUT = Path("runs") / "studies"  # the committed results: --out studies/results
 QUANTITIES = ("E", "W", "G", "V", "A", "dA")
 
 #: discretisation -> (backend, options)
@@ -377,8 +377,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--parts", nargs="*", default=["spatial", "graded", "steady", "temporal"])
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--runs", default=None,
-                    help="where the resolved starts' run folders go (default runs/convergence, "
-                         "under --out in quick mode)")
+                    help="where the resolved starts' run folders go (default runs/convergence)")
     ap.add_argument("--scenes", nargs="*", default=None,
                     help="the spatial part for these scenes only (the others' results kept)")
     ap.add_argument("--repeats", type=int, default=None,
@@ -398,7 +397,7 @@ def main(argv=None) -> dict:
                                    if k in args.scenes}}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    runs = Path(args.runs) if args.runs else (out / "runs" if quick else Path("runs/convergence"))
+    runs = Path(args.runs) if args.runs else Path("runs") / "convergence"
     name = "convergence_quick.json" if quick else "convergence.json"
     path = out / name
     results = json.loads(path.read_text()) if path.is_file() and not quick else {}

@@ -30,7 +30,7 @@ import math
 import time
 from pathlib import Path
 
-OUT = Path(__file__).resolve().parent / "results"
+OUT = Path("runs") / "studies"  # the committed results: --out studies/results
 TARGETS = (1e-2, 1e-3, 1e-4, 1e-5)
 
 
@@ -114,8 +114,8 @@ def summarize(runs: list[dict]) -> dict:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="its own quick 2D study (seconds)")
-    ap.add_argument("--convergence", default=str(OUT / "convergence.json"),
-                    help="the convergence study's results (full mode)")
+    ap.add_argument("--convergence", default=None,
+                    help="the convergence study's results (default: OUT/convergence.json)")
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args(argv)
     out = Path(args.out)
@@ -125,7 +125,7 @@ def main(argv=None) -> dict:
         conv = _convergence()
         data = conv.main(["--quick", "--parts", "spatial", "steady", "--out", str(out)])
     else:
-        path = Path(args.convergence)
+        path = Path(args.convergence) if args.convergence else out / "convergence.json"
         if not path.is_file():
             raise SystemExit(f"cost.py: {path} not found: run studies/convergence.py first")
         data = json.loads(path.read_text())

@@ -26,7 +26,9 @@ with another smooth perturbation (0.05, seed 2) and run to a steady state again 
 it is stable if the kick returns to the same label and E (to 1e-4), else the kick's end is
 reported too.
 
-Results in ``studies/results/gallery/``: one folder per run (``runs/VARIANT/BACKEND/SCENE``
+Results in ``--out`` (default ``runs/gallery``; the committed gallery is
+``studies/results/gallery/``, and only a report into it updates ``fem_ade/verdicts.json``,
+which ``python -m fem_ade.run --list`` reads): one folder per run (``runs/VARIANT/BACKEND/SCENE``
 with summary.json, history.csv, shapes.csv, shape.png, analysis.json, and ``kick/``), the
 table ``gallery.md``, a montage per backend (``montage-BACKEND.png``: rows are scenes,
 columns variants) and the phase diagram ``phase-diagram.png``. Resumable: a finished run is
@@ -52,7 +54,9 @@ from pathlib import Path
 
 import numpy as np
 
-OUT = Path(__file__).resolve().parent / "results" / "gallery"
+#: the committed gallery (its verdicts also go to fem_ade/verdicts.json when it is --out)
+RESULTS = Path(__file__).resolve().parent / "results" / "gallery"
+OUT = Path("runs") / "gallery"
 VARIANTS = ("a", "b", "b-loc", "c", "c-loc", "d")
 BACKENDS = ("spectral", "fem")
 TOL = 1e-9
@@ -558,7 +562,7 @@ def write_report(root: Path, names, backends, variants, quick: bool = False) -> 
     verdicts = {k: verdict(a, PAPER_SCENES[k[2]].shape, k[0]) if a is not None
                 else interrupted(root, *k) for k, a in data.items()}
     verdicts = {k: v for k, v in verdicts.items() if v is not None}
-    if root.resolve() == OUT.resolve() and not quick:
+    if root.resolve() == RESULTS.resolve() and not quick:
         write_verdicts(verdicts)
     return {"verdicts": verdicts}
 

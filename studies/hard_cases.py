@@ -60,7 +60,8 @@ def main(argv=None) -> list[dict]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--backend", default="spectral")
     ap.add_argument("--quick", action="store_true", help="two scenes, n = 16 (also when CI)")
-    ap.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    ap.add_argument("--out", default="runs/studies",
+                    help="results folder (default %(default)s; the committed: studies/results)")
     args = ap.parse_args(argv)
     quick = args.quick or bool(os.environ.get("CI"))
     scenes = list(PAPER_SCENES.values())[:2] if quick else list(PAPER_SCENES.values())

@@ -24,7 +24,8 @@ def main(argv=None) -> Path:
     ap.add_argument("--steps", type=int, default=None)
     ap.add_argument("--order", type=int, default=4)
     ap.add_argument("--n", type=int, default=12)
-    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "readme"))
+    ap.add_argument("--out", default="runs/readme",
+                    help="default %(default)s; the README's: studies/results/readme")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -13,7 +13,8 @@ AMG hierarchy; m₂: what every rank holds of the whole mesh — the fields gath
 outputs, the output grid), and used to say what a node of a given size serves and how many
 ranks 256³ and 512³ need.
 
-Writes ``studies/results/scaling.json`` and ``scaling.md``; resumable (a finished case is
+Writes ``OUT/scaling.json`` and ``scaling.md`` (``--out``, default ``runs/studies``; the
+committed: ``--out studies/results``); resumable (a finished case is
 kept). Needs petsc4py, mpi4py and mpirun (``scripts/install-petsc.sh``). Measure on an
 otherwise idle machine: the 2-rank figures share the machine's two cores.
 
@@ -36,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-OUT = Path(__file__).resolve().parent / "results"
+OUT = Path("runs") / "studies"  # the committed results: --out studies/results
 STEPS = {32: 20, 64: 10, 128: 5}
 
 

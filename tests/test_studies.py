@@ -189,20 +189,46 @@ def check_scaling(result, out):
     assert "| 256³ |" in (out / "scaling.md").read_text()
 
 
+def check_regenerate(result, out):
+    """The one command that writes studies/results runs every study that has results there,
+    each with that folder as --out (the other studies write under runs/)."""
+    studies = {p.stem for p in SCRIPTS} - {"regenerate"}
+    assert set(result) == studies, set(result) ^ studies
+    assert all("--out studies/results" in line for line in result.values()), result
+
+
 ARGS = {"readme_figure": ["--steps", "2", "--n", "6"]}
+#: where each study writes by default (under the current directory)
+DEFAULT_OUT = {"gallery": "runs/gallery", "readme_figure": "runs/readme"}
+
+
+def _checkout_status() -> str | None:
+    """``git status`` of the checkout (None where it is not a git checkout)."""
+    import subprocess
+
+    root = STUDIES.parent
+    if not (root / ".git").exists():
+        return None
+    r = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=all"],
+                       capture_output=True, text=True)
+    return r.stdout if r.returncode == 0 else None
 
 
 @pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW
                                   else p for p in SCRIPTS], ids=[p.stem for p in SCRIPTS])
-def test_study_quick_mode(path, tmp_path, capsys):
+def test_study_quick_mode(path, tmp_path, capsys, monkeypatch):
+    """Each study's quick mode, run as documented (no --out, from some folder): its figures
+    make sense, it writes under runs/ there, and the checkout is left as it was."""
     _needs_mpi(path)
     module = _load(path)
     assert capsys.readouterr().out == "", "a study must be quiet on import"
     check = globals().get(f"check_{path.stem}")
     assert check is not None, f"add check_{path.stem} to tests/test_studies.py"
-    args = ARGS.get(path.stem, ["--quick"])
-    result = module.main([*args, "--out", str(tmp_path)])
-    check(result, tmp_path)
+    before = _checkout_status()
+    monkeypatch.chdir(tmp_path)
+    result = module.main(ARGS.get(path.stem, ["--quick"]))
+    check(result, tmp_path / DEFAULT_OUT.get(path.stem, "runs/studies"))
+    assert _checkout_status() == before, "the study wrote into the checkout"
 
 
 def test_gallery_plan():

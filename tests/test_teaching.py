@@ -84,6 +84,7 @@ def test_example(path, tmp_path, capsys):
     assert capsys.readouterr().out == "", "importing the example printed something"
     check = globals().get(f"check_{path.stem}")
     assert check is not None, f"add check_{path.stem} to tests/test_teaching.py"
+    assert Path(module.OUT).parts[0] == "runs", "an example writes under runs/ by default"
     result = module.main(quick=True, out=tmp_path)
     assert Path(result["png"]).is_file() and Path(result["png"]).parent == tmp_path
     assert all(np.isfinite(v) for v in result.values() if isinstance(v, float))

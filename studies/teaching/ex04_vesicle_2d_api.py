@@ -41,7 +41,7 @@ from fem_ade.model import Params
 from fem_ade.runs import simulate
 from fem_ade.scenes import Scene
 
-OUT = Path(__file__).resolve().parents[1] / "results" / "teaching"
+OUT = Path("runs") / "teaching"  # PNGs go here unless --out
 SEMI_AXES = (0.35, 0.1)
 C_LEVEL = 0.1
 

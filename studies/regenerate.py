@@ -1,0 +1,56 @@
+"""Regenerate the committed results in ``studies/results`` — the one command that writes there.
+
+Every study writes under ``runs/`` (ignored by git) unless told otherwise; this script runs
+each of them with the committed folder as ``--out``, in an order where each finds what it
+reads (cost.py reads convergence.json). The whole set takes hours on 2 cores (the gallery
+most of them); ``--only`` picks studies, ``--dry-run`` prints the commands.
+
+    python studies/regenerate.py --dry-run
+    python studies/regenerate.py --only convergence cost bench
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = "studies/results"
+#: (name, the script and its arguments), in the order they run
+STEPS = (
+    ("convergence", ["studies/convergence.py", "--out", RESULTS]),
+    ("cost", ["studies/cost.py", "--out", RESULTS]),
+    ("bench", ["studies/bench.py", "--out", RESULTS]),
+    ("scaling", ["studies/scaling.py", "--out", RESULTS]),
+    ("hard_cases", ["studies/hard_cases.py", "--out", RESULTS]),
+    ("constraints_study", ["studies/constraints_study.py", "--out", RESULTS]),
+    ("gallery", ["studies/gallery.py", "--out", f"{RESULTS}/gallery", "--max-steps", "5000"]),
+    ("readme_figure", ["studies/readme_figure.py", "--out", f"{RESULTS}/readme"]),
+)
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--only", nargs="*", choices=[name for name, _ in STEPS], default=None)
+    ap.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    ap.add_argument("--quick", action="store_true", help="the same as --dry-run (the tests)")
+    args = ap.parse_args(argv)
+    chosen = [(name, cmd) for name, cmd in STEPS if args.only is None or name in args.only]
+    done = {}
+    for name, cmd in chosen:
+        line = " ".join(["python", *cmd])
+        print(line, flush=True)
+        if args.dry_run or args.quick:
+            done[name] = line
+            continue
+        code = subprocess.call([sys.executable, *cmd], cwd=ROOT)
+        if code != 0:
+            raise SystemExit(f"regenerate: {name} failed with exit code {code}")
+        done[name] = line
+    return done
+
+
+if __name__ == "__main__":
+    main()
