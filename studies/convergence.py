@@ -30,8 +30,8 @@ and loop) and wall time. Times are one thread: this script sets ``OPENBLAS_NUM_T
 
 Writes ``convergence.json``, ``convergence.md`` and ``convergence-*.png`` into ``--out``
 (default ``runs/studies``; the committed results: ``--out studies/results``), the start
-folders under ``--runs`` (default ``runs/convergence``). The full run takes about an hour on 2 cores; ``--quick`` (the test
-suite) seconds.
+folders under ``--runs`` (default ``runs/convergence``). The full run takes about an hour
+on 2 cores; ``--quick`` (the test suite) seconds.
 
     python studies/convergence.py [--parts spatial steady temporal] [--scenes discocyte]
     python studies/convergence.py --quick --out /tmp/c
