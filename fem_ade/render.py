@@ -137,8 +137,11 @@ def _render_vtk(S: Surface, size: tuple[int, int], view, slice_y: float,
                    opacity=0.35 if c in translucent else 1.0, specular=0.35,
                    specular_power=25, ambient=0.12, diffuse=0.85)
         trace = mesh.slice(normal="y", origin=(0.0, slice_y, 0.0))
-        if trace.n_points:
-            p.add_mesh(trace, color="#1a1a1a", line_width=5)
+        if trace.n_points:  # the right panel's section, drawn on the surface: lifted off it
+            # a little (flush, the surface hid it in pieces: thin broken "seams") and thick
+            lift = 0.2 * float(np.min(S.h))
+            trace.points = trace.points + lift * S.outward_normals_at(trace.points)
+            p.add_mesh(trace, color="#202020", line_width=7)
     if S.n_components:
         pts = S.points
         centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
@@ -262,7 +265,9 @@ def render_shape(phi: np.ndarray, L: float, path: str | Path, *, title: str | No
         _render_mpl(ax3, S, view, translucent)
     if not S.n_components:
         ax3.text(0.5, 0.5, "no φ = 0 surface", transform=ax3.transAxes, ha="center")
-    ax3.set_title(f"membrane φ = 0  (view az {view[0]:g}°, el {view[1]:g}°)", fontsize=12)
+    traced = engine == "vtk" and S.n_components
+    ax3.set_title(f"membrane φ = 0 (view az {view[0]:g}°, el {view[1]:g}°"
+                  + (f"; black: the section y = {y_shown:.3g})" if traced else ")"), fontsize=11)
 
     # right: section y = const, periodic images closed
     ax = fig.add_subplot(gs[1])

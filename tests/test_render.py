@@ -86,6 +86,32 @@ def test_render_shape_both_engines(tmp_path):
         assert _png_size(path) == (900, 450)
 
 
+def test_shape_picture_shows_the_membrane_and_its_section(tmp_path):
+    """What the 3D view shows: the membrane in its colour, and — VTK — the section y = ½ as
+    one whole dark curve across it (flush with the surface it showed as broken "seams"):
+    a torus cut by y = ½ in two circles; the dark pixels of the left panel form long runs."""
+    from fem_ade.render import COLOURS, choose_engine
+
+    n = 48
+    x = np.arange(n) / n
+    X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
+    rho = np.sqrt((X - 0.5) ** 2 + (Y - 0.5) ** 2)
+    phi = np.tanh((0.1 - np.sqrt((rho - 0.25) ** 2 + (Z - 0.5) ** 2)) / (np.sqrt(2) * 0.03))
+    path = render_shape(phi, 1.0, tmp_path / "torus.png", title="torus", size=(900, 450))
+    with Image.open(path) as im:
+        left = np.asarray(im.convert("RGB"))[60:, :430].astype(int)
+    membrane = np.array([int(COLOURS[0][i:i + 2], 16) for i in (1, 3, 5)])
+    near = np.abs(left - membrane).sum(axis=2) < 120
+    shaded = (left[..., 0] > left[..., 2] + 40)  # warm: the membrane, lit or shaded
+    print(f"membrane-coloured {near.mean():.3f}, warm {shaded.mean():.3f} of the left panel")
+    assert shaded.mean() > 0.05
+    if choose_engine("auto") == "vtk":
+        dark = left.sum(axis=2) < 150
+        rows = np.flatnonzero(dark.any(axis=1))
+        print(f"dark pixels {dark.sum()}, over {len(rows)} rows")
+        assert dark.sum() > 300 and len(rows) > 60  # two curves across the tube, whole
+
+
 def test_render_history_computes_penalties(tmp_path):
     csv = tmp_path / "history.csv"
     t = np.linspace(0, 1e-5, 6)
