@@ -252,8 +252,15 @@ def _stop_if_interrupted(folder: Path) -> None:
 
 
 def run_case(root: Path, case: dict, *, quiet: bool, keep: bool) -> dict:
+    """Run one case (and its kick) unless it is finished: analysed in its folder or kept in
+    the archive (a run whose folder is gone is not run again; remove its archive entry to)."""
     folder = case_dir(root, case)
     scene = scene_for(case)
+    kept = json.loads((root / ARCHIVE).read_text()) if (root / ARCHIVE).is_file() else {}
+    entry = kept.get(_key(case["variant"], case["backend"], case["scene"]))
+    if entry is not None and not (folder / "analysis.json").is_file() and (
+            case["variant"] == "a" or entry.get("status") != "steady" or "kick" in entry):
+        return {k: v for k, v in entry.items() if k != "kick"}
     if (folder / "analysis.json").is_file() and (
             case["variant"] == "a" or (folder / "kick" / "analysis.json").is_file()):
         return json.loads((folder / "analysis.json").read_text())
@@ -312,13 +319,14 @@ def main(argv=None) -> dict:
         ap.error(f"--fem-order must be 1 to 16, got {args.fem_order}")
     extra = [f"fem-p{args.fem_order}"] if args.fem_order else []
     cases = plan(names, backends + extra, args.variants, quick, args.max_steps, args.steps_a)
+    kept = json.loads((root / ARCHIVE).read_text()) if (root / ARCHIVE).is_file() else {}
     results = {}
     for case in cases:
         key = (case["variant"], case["backend"], case["scene"])
         if args.report_only:
-            path = case_dir(root, case) / "analysis.json"
-            if path.is_file():
-                results[key] = json.loads(path.read_text())
+            a = _load(root, *key, kept)
+            if a is not None:
+                results[key] = {k: v for k, v in a.items() if k not in ("folder", "kick")}
             continue
         try:
             results[key] = run_case(root, case, quiet=not args.verbose, keep=args.keep)
@@ -338,9 +346,11 @@ def write_pairs(root: Path, backend: str) -> dict:
     from fem_ade.scenes import PAPER_SCENES
 
     rows, same, close = [], 0, 0
+    entries = archive(root)
     for v in VARIANTS:
         for name in PAPER_SCENES:
-            a, b = _load(root, v, "spectral", name), _load(root, v, backend, name)
+            a = _load(root, v, "spectral", name, entries)
+            b = _load(root, v, backend, name, entries)
             if a is None or b is None or not a.get("shape") or not b.get("shape"):
                 continue
             Ea, Eb = a["final"]["E"], b["final"]["E"]
@@ -372,17 +382,83 @@ def write_pairs(root: Path, backend: str) -> dict:
 # ---------------------------------------------------------------------------------------
 # the report: verdicts, tables, montages, phase diagram
 # ---------------------------------------------------------------------------------------
-def _load(root: Path, variant: str, backend: str, name: str) -> dict | None:
+#: what a reader of the gallery needs, kept beside the report: every run's analysis (and its
+#: kick's) in one file, and a thumbnail of each run's picture; the run folders themselves
+#: (``runs/``) are regenerated on demand and not committed
+ARCHIVE, THUMBS = "analyses.json", "thumbs"
+THUMB_WIDTH = 420
+
+
+def _key(variant: str, backend: str, name: str) -> str:
+    return f"{variant}/{backend}/{name}"
+
+
+def _thumb(root: Path, variant: str, backend: str, name: str) -> Path:
+    return root / THUMBS / f"{variant}-{backend}-{name}.png"
+
+
+def archive(root: Path) -> dict:
+    """Bring ``ARCHIVE`` and the thumbnails up to date with the analysed run folders under
+    ``root`` (kept entries of runs whose folders are gone stay); returns the archive."""
+    from PIL import Image
+
+    from fem_ade.scenes import PAPER_SCENES
+
+    path = root / ARCHIVE
+    entries = json.loads(path.read_text()) if path.is_file() else {}
+    changed = False
+    backends = sorted({p.name for p in (root / "runs").glob("*/*") if p.is_dir()})
+    for v in VARIANTS:
+        for b in backends:
+            for n in PAPER_SCENES:
+                folder = run_dir(root, v, b, n)
+                if not (folder / "analysis.json").is_file():
+                    continue
+                a = json.loads((folder / "analysis.json").read_text())
+                kick = folder / "kick" / "analysis.json"
+                if kick.is_file():
+                    a["kick"] = json.loads(kick.read_text())
+                if entries.get(_key(v, b, n)) != a:
+                    entries[_key(v, b, n)] = a
+                    changed = True
+                png, thumb = folder / "shape.png", _thumb(root, v, b, n)
+                if png.is_file() and (not thumb.is_file()
+                                      or thumb.stat().st_mtime < png.stat().st_mtime):
+                    thumb.parent.mkdir(parents=True, exist_ok=True)
+                    with Image.open(png) as im:
+                        w, h = im.size
+                        cell = im.convert("RGB").crop((0, int(0.17 * h), w, h))
+                        cell = cell.resize((THUMB_WIDTH, round(THUMB_WIDTH * cell.size[1]
+                                                               / cell.size[0])),
+                                           Image.Resampling.LANCZOS)
+                    cell.quantize(64).save(thumb, optimize=True)
+    if changed:
+        path.write_text(json.dumps(entries, indent=0, sort_keys=True, default=str) + "\n")
+    return entries
+
+
+def _load(root: Path, variant: str, backend: str, name: str,
+          entries: dict | None = None) -> dict | None:
+    """A run's analysis (and its kick's): from its folder, else from the archive."""
     folder = run_dir(root, variant, backend, name)
     path = folder / "analysis.json"
-    if not path.is_file():
-        return None
-    a = json.loads(path.read_text())
-    kick = folder / "kick" / "analysis.json"
-    if kick.is_file():
-        a["kick"] = json.loads(kick.read_text())
-    a["folder"] = str(folder)
-    return a
+    if path.is_file():
+        a = json.loads(path.read_text())
+        kick = folder / "kick" / "analysis.json"
+        if kick.is_file():
+            a["kick"] = json.loads(kick.read_text())
+        a["folder"] = str(folder)
+        return a
+    if entries and _key(variant, backend, name) in entries:
+        return dict(entries[_key(variant, backend, name)], folder=None)
+    return None
+
+
+def _picture(root: Path, variant: str, backend: str, name: str, a: dict) -> Path:
+    """The run's picture: its shape.png, else its thumbnail."""
+    if a.get("folder") and (Path(a["folder"]) / "shape.png").is_file():
+        return Path(a["folder"]) / "shape.png"
+    return _thumb(root, variant, backend, name)
 
 
 def interrupted(root: Path, variant: str, backend: str, name: str) -> str | None:
@@ -490,8 +566,9 @@ def _with_analysed(root: Path, names, backends, variants) -> tuple[list, list, l
     those cells alone."""
     from fem_ade.scenes import PAPER_SCENES
 
+    kept = json.loads((root / ARCHIVE).read_text()) if (root / ARCHIVE).is_file() else {}
     found = [(v, b, n) for v in VARIANTS for b in BACKENDS for n in PAPER_SCENES
-             if (run_dir(root, v, b, n) / "analysis.json").is_file()]
+             if (run_dir(root, v, b, n) / "analysis.json").is_file() or _key(v, b, n) in kept]
     vs = set(variants) | {v for v, _, _ in found}
     bs = set(backends) | {b for _, b, _ in found}
     ns = set(names) | {n for _, _, n in found}
@@ -505,8 +582,10 @@ def write_report(root: Path, names, backends, variants, quick: bool = False) -> 
     from fem_ade.scenes import PAPER_SCENES
 
     root.mkdir(parents=True, exist_ok=True)
+    entries = archive(root)
     names, backends, variants = _with_analysed(root, names, backends, variants)
-    data = {(v, b, n): _load(root, v, b, n) for v in variants for b in backends for n in names}
+    data = {(v, b, n): _load(root, v, b, n, entries) for v in variants for b in backends
+            for n in names}
     lines = ["# The paper's gallery, settled", "",
              "Generated by `studies/gallery.py` (its docstring says what each variant runs). "
              "Labels are those of `fem_ade.shape.classify`; v and Δa are the sharp surface's "
@@ -598,7 +677,7 @@ def montage(root: Path, data, names, backend, variants) -> Path | None:
     from matplotlib.figure import Figure
     from PIL import Image
 
-    cells = {(n, v): Path(data[(v, backend, n)]["folder"]) / "shape.png"
+    cells = {(n, v): _picture(root, v, backend, n, data[(v, backend, n)])
              for n in names for v in variants if data.get((v, backend, n))}
     cells = {k: p for k, p in cells.items() if p.is_file()}
     if not cells:
@@ -614,7 +693,9 @@ def montage(root: Path, data, names, backend, variants) -> Path | None:
             if (n, v) in cells:
                 with Image.open(cells[(n, v)]) as im:
                     w, h = im.size
-                    ax.imshow(np.asarray(im.convert("RGB").crop((0, int(0.17 * h), w, h))))
+                    full = cells[(n, v)].parent.name != THUMBS  # a thumbnail is cropped
+                    ax.imshow(np.asarray(im.convert("RGB").crop(
+                        (0, int(0.17 * h) if full else 0, w, h))))
                 a = data[(v, backend, n)]
                 status = {"diverged": f"diverged at step {a['steps']}",
                           "max_steps": f"at the cap, step {a['steps']}"}.get(a["status"])

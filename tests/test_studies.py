@@ -171,6 +171,15 @@ def check_gallery(result, out):
     assert again["report"]["verdicts"] == verdicts
     text = (out / "gallery.md").read_text()
     assert "| discocyte (Fig. 1) | discocyte |" in text and "| torus (Fig. 2) | torus |" in text
+    # what is committed is the archive (every analysis, one thumbnail a run): without the run
+    # folders the report is the same
+    import shutil
+
+    assert (out / "analyses.json").is_file() and list((out / "thumbs").glob("*.png"))
+    shutil.rmtree(out / "runs")
+    again = gallery.main(["--quick", "--report-only", "--scenes", "torus", "--out", str(out)])
+    assert again["report"]["verdicts"] == verdicts
+    assert (out / "montage-spectral.png").is_file()
 
 
 def check_scaling(result, out):
