@@ -92,6 +92,17 @@ def common_kwargs(name: str, variant: str, n: int, extra: dict, allow: bool) -> 
     )
 
 
+def _compress(png: Path, colours: int = 128) -> None:
+    """A picture the results keep, in a palette of ``colours`` (a third of the bytes)."""
+    if not png.is_file():
+        return
+    from PIL import Image
+
+    with Image.open(png) as im:
+        small = im.convert("RGB").quantize(colours)
+    small.save(png, optimize=True)
+
+
 def energy_rises(history: list[dict], rel: float = 1e-12) -> int:
     """How many records have E_M above the previous record (beyond ``rel`` relative)."""
     Es = [float(r["E"]) for r in history]
@@ -453,10 +464,11 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
         }
         from fem_ade.output import series_files
 
-        for f in ("final.npz", "run.json", "initial.npz"):
-            (out / f).unlink(missing_ok=True)
+        for f in ("final.npz", "run.json", "initial.npz", "history.png"):
+            (out / f).unlink(missing_ok=True)  # the tables cite shape.png only
         for f in series_files(out):
             f.unlink()
+        _compress(out / "shape.png")
         if not quiet:
             print(label, json.dumps(report["runs"][label]["end"]), flush=True)
     rep_path.parent.mkdir(parents=True, exist_ok=True)
