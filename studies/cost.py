@@ -123,7 +123,7 @@ def main(argv=None) -> dict:
     t0 = time.perf_counter()
     if args.quick:
         conv = _convergence()
-        data = conv.main(["--quick", "--parts", "spatial", "steady", "--out", str(out)])
+        data = conv.main(["--quick", "--parts", "spatial", "--out", str(out)])
     else:
         path = Path(args.convergence) if args.convergence else out / "convergence.json"
         if not path.is_file():

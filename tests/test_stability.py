@@ -158,7 +158,8 @@ def test_fem_variants_run_with_decaying_energy(options):
     scene = get_scene("discocyte")
     n = 24 // options.get("order", 1)
     be = make_backend("fem", scene, n=n, dt=scene.dt, **options)
-    res = run_loop(be, dt=scene.dt, steps=40, every=5)
+    steps = 15 if options.get("solver") == "amg" else 40  # PCG with AMG: 20× the step's cost
+    res = run_loop(be, dt=scene.dt, steps=steps, every=5)
     assert res.status == "completed", res.message
     assert _decays(res.history)
     assert be.max_abs_phi() <= 1.2
