@@ -285,7 +285,7 @@ def _main(argv, scratch: str | None = None) -> int:
             return _error(str(err))
         except WriteFailed as err:
             return _failed(str(err))
-        return _report(scene, config["backend"], result, args.resume)
+        return _report(scene, config.backend, result, args.resume)
     if args.scene is None:
         from .scenes import SCENES
 
@@ -293,6 +293,7 @@ def _main(argv, scratch: str | None = None) -> int:
     if args.out == "":
         return _error("--out needs a folder name")
     try:
+        from .config import RunConfig
         from .runs import recipe
         from .scenes import resolve_scene
 
@@ -320,18 +321,18 @@ def _main(argv, scratch: str | None = None) -> int:
         if scratch is not None:  # an MPI rank > 0: the same run, written to its own folder
             out, args.out, args.force, args.quiet, args.no_render = scratch, scratch, True, \
                 True, True
-        result = simulate(
+        config = RunConfig.build(
             scene, backend=args.backend, n=args.n, dt=args.dt, steps=args.steps,
             until_steady=args.until_steady,
             max_steps=100_000 if args.max_steps is None else args.max_steps,
             every=args.every, ic=args.ic, perturb=args.perturb, seed=args.seed,
-            phi0=args.phi0, out=out, force=args.force, fresh=not args.out,
-            quiet=args.quiet, allow_underresolved=args.allow_underresolved,
             backend_options=options, scheme=args.scheme, constraints=args.constraints,
             adaptive=args.adaptive, accelerate=args.accelerate,
             checkpoint_every=args.checkpoint_every, save_every=args.save_every,
-            shape_every=args.shape_every, render=not args.no_render, dry_run=args.dry_run,
-        )
+            shape_every=args.shape_every, render=not args.no_render)
+        result = simulate(scene, config=config, phi0=args.phi0, out=out, force=args.force,
+                          fresh=not args.out, quiet=args.quiet,
+                          allow_underresolved=args.allow_underresolved, dry_run=args.dry_run)
     except ModelError as err:
         return _error(str(err))
     except WriteFailed as err:

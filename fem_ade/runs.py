@@ -20,15 +20,15 @@ import math
 import os
 import time
 import warnings
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
-from .backend import Backend, backend_class, check_backend, make_backend
+from .backend import Backend, make_backend
+from .config import RunConfig
 from .initial import FieldIC, check_grid_field
 from .loop import AdaptiveDt, LoopState, RunResult, run_loop
-from .model import HISTORY_COLUMNS, ModelError, max_stable_dt
+from .model import HISTORY_COLUMNS, ModelError
 from .output import (
     HistoryWriter,
     check_history,
@@ -109,6 +109,7 @@ def simulate(
     backend_options: dict | None = None,
     dry_run: bool = False,
     fresh: bool = False,
+    config: RunConfig | None = None,
 ) -> RunResult | str:
     """Run ``scene`` with ``backend`` and, if ``out`` is given, write its run folder there.
 
@@ -125,30 +126,27 @@ def simulate(
     ``OUT/shapes.csv`` and in the result's ``shapes`` (a transient shows as a label that comes
     and goes); ``monitor(backend, row)`` (Python only) is then called with each row.
 
-    Every input is checked first (ModelError, nothing created): the numbers, the scene, the
-    backend's options, the output folder, and the initial field (finite, with an inside).
-    Then the folder is made (``fresh``: a new folder, as the CLI's default) and, with
-    ``force``, the previous run's files in it are removed. ``dry_run``: check, then return a
-    one-line description instead of running.
+    The run's choices become one :class:`fem_ade.config.RunConfig` (or give ``config``, one
+    built already, instead of them): every input is checked first (ModelError, nothing
+    created): the numbers, the scene, the backend's options, the output folder, and the
+    initial field (finite, with an inside and an outside). Then the folder is made
+    (``fresh``: a new folder, as the CLI's default) and locked, and, with ``force``, the
+    previous run's files in it are removed. ``dry_run``: check, then return a one-line
+    description instead of running.
     """
     scene = _scene_argument(scene)
-    if backend_options is not None and not isinstance(backend_options, dict):
-        raise TypeError(f"backend_options must be a dict, got {type(backend_options).__name__}")
     if monitor is not None and not callable(monitor):
         raise TypeError(f"monitor must be callable (backend, row), got "
                         f"{type(monitor).__name__}")
-    for name, value in (("dt", dt), ("until_steady", until_steady)):
-        if value is not None and (isinstance(value, bool) or not isinstance(
-                value, (int, float, np.integer, np.floating))):
-            raise ModelError(f"{name} must be a number, got {value!r}")
-    if not _real(perturb):  # None included: perturb has no "not given"
-        raise ModelError(f"perturb must be a number >= 0, got {perturb!r}")
-    options = dict(backend_options or {})
-    if n is None:  # the scene's resolution, as the backend counts it
-        n = backend_class(backend).default_n(scene, **options)
-    dt = scene.dt if dt is None else dt
-    if steps is None and until_steady is None:
-        steps = scene.steps
+    if config is None:
+        if not _real(perturb):  # None included: perturb has no "not given"
+            raise ModelError(f"perturb must be a number >= 0, got {perturb!r}")
+        config = RunConfig.build(
+            scene, backend=backend, n=n, dt=dt, steps=steps, until_steady=until_steady,
+            max_steps=max_steps, every=every, ic=ic, perturb=perturb, seed=seed, scheme=scheme,
+            constraints=constraints, adaptive=adaptive, accelerate=accelerate,
+            checkpoint_every=checkpoint_every, save_every=save_every, shape_every=shape_every,
+            render=render, backend_options=backend_options)
     initial = None
     if phi0 is not None:
         if isinstance(phi0, (str, Path)):
@@ -161,41 +159,19 @@ def simulate(
             initial = check_grid_field(phi0, "phi0")
             scene = scene.with_(ic=FieldIC(grid=initial))
         scene.ic.check(scene.dim)
-    check_backend(backend, scene, n=n, dt=dt, scheme=scheme, constraints=constraints,
-                  allow_underresolved=allow_underresolved, **options)
-    check_loop_options(steps=steps, until_steady=until_steady, max_steps=max_steps, every=every,
-                       checkpoint_every=checkpoint_every, save_every=save_every,
-                       shape_every=shape_every)
-    if not (math.isfinite(perturb) and perturb >= 0):
-        raise ModelError(f"--perturb must be a number >= 0, got {perturb}")
-    if not (isinstance(seed, int) and seed >= 0):
-        raise ModelError(f"--seed must be an integer >= 0, got {seed}")
-    if adaptive is True:
-        params = scene.params
-        dt_max = 1000 * dt if scheme == "stabilized" else min(1000 * dt,
-                                                               0.9 * max_stable_dt(params))
-        adaptive = {"dt_min": dt / 1000, "dt_max": max(dt, dt_max)}
-    adaptive = asdict(AdaptiveDt(**adaptive)) if adaptive else None
-    if accelerate and adaptive:
-        raise ModelError("--accelerate and --adaptive do not go together (momentum needs a "
-                         "fixed step map)")
+    config.check(scene, allow_underresolved=allow_underresolved)
     out = check_out_dir(out, force=force) if out is not None else None
-    config = {"scene": scene_to_mapping(scene) if out is not None else None,
-              "backend": backend, "n": n, "dt": dt,
-              "steps": steps, "until_steady": until_steady, "max_steps": max_steps,
-              "every": every, "ic": ic, "perturb": perturb, "seed": seed, "scheme": scheme,
-              "constraints": constraints, "adaptive": adaptive, "accelerate": accelerate,
-              "checkpoint_every": checkpoint_every, "save_every": save_every,
-              "shape_every": shape_every, "render": render, "backend_options": options}
     be = build_backend(scene, config)  # checks the initial field, writes nothing
     if dry_run:
         info = be.info()
-        grid = info.get("resolution", f"n = {n}")
-        return (f"{scene.name} with the {backend} backend ({grid}, "
-                f"{scheme} scheme, {constraints} constraints, dt = {dt:g}, "
-                + (f"{steps} steps" if steps is not None else
-                   f"until steady (tol {until_steady:g}, at most {max_steps} steps)")
-                + (", momentum" if accelerate else "") + ")"
+        grid = info.get("resolution", f"n = {config.n}")
+        return (f"{scene.name} with the {config.backend} backend ({grid}, "
+                f"{config.scheme} scheme, {config.constraints} constraints, "
+                f"dt = {config.dt:g}, "
+                + (f"{config.steps} steps" if config.steps is not None else
+                   f"until steady (tol {config.until_steady:g}, at most {config.max_steps} "
+                   "steps)")
+                + (", momentum" if config.accelerate else "") + ")"
                 + (f" into {out}" if out is not None else ""))
     if out is None:
         return _execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)
@@ -205,7 +181,6 @@ def simulate(
             write_fields(out / "initial.npz", {"phi": initial})
             scene = scene.with_(ic=FieldIC(path=str((out / "initial.npz").resolve()),
                                            grid=initial))
-        config["scene"] = scene_to_mapping(scene)
         return _execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)
     finally:
         lock.release()
@@ -229,14 +204,14 @@ def _scene_argument(scene) -> Scene:
     raise TypeError(f"scene must be a Scene or a scene name, got {type(scene).__name__}")
 
 
-def build_backend(scene: Scene, config: dict, state: dict | None = None) -> Backend:
+def build_backend(scene: Scene, config: RunConfig, state: dict | None = None) -> Backend:
     """The run's backend (its initial field checked: finite, with an inside), or from a
     checkpoint's ``state``."""
     c0 = time.process_time()
-    be = make_backend(config["backend"], scene, n=config["n"], ic=config["ic"],
-                      perturb=config["perturb"], seed=config["seed"], scheme=config["scheme"],
-                      constraints=config["constraints"], start_state=state,
-                      **config["backend_options"])
+    be = make_backend(config.backend, scene, n=config.n, ic=config.ic,
+                      perturb=config.perturb, seed=config.seed, scheme=config.scheme,
+                      constraints=config.constraints, start_state=state,
+                      **config.backend_options)
     be.setup_cpu_s = time.process_time() - c0  # the set-up's CPU time (summary.json)
     phi = be.fields()["phi"]
     if not np.all(np.isfinite(phi)):
@@ -260,23 +235,6 @@ def default_out(scene_name: str, backend: str) -> Path:
 
     stamp = time.strftime("%Y%m%d-%H%M%S")
     return Path("runs") / f"{scene_name}-{backend}-{stamp}-{secrets.token_hex(2)}"
-
-
-def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_every=None,
-                       save_every=None, shape_every=None) -> None:
-    """The loop's numbers, before anything is written (ModelError, one line)."""
-    if (steps is None) == (until_steady is None):
-        raise ModelError("give exactly one of steps and until_steady")
-    for name, value, low in (("steps", steps, 1), ("max-steps", max_steps, 1),
-                             ("every", every, 1), ("checkpoint-every", checkpoint_every, 1),
-                             ("save-every", save_every, 1), ("shape-every", shape_every, 1)):
-        if value is None:
-            continue
-        if not (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
-                and value >= low):
-            raise ModelError(f"--{name} must be an integer >= {low}, got {value}")
-    if until_steady is not None and not (math.isfinite(until_steady) and until_steady > 0):
-        raise ModelError(f"--until-steady must be a positive number, got {until_steady}")
 
 
 def resume(out: str | Path, *, steps: int | None = None, quiet: bool = True,
@@ -313,51 +271,25 @@ def resume(out: str | Path, *, steps: int | None = None, quiet: bool = True,
     return (result, scene, config) if with_config else result
 
 
-#: run.json's keys and what each must be
-_CONFIG_KEYS = ("scene", "backend", "n", "dt", "steps", "until_steady", "max_steps", "every",
-                "ic", "perturb", "seed", "scheme", "constraints", "adaptive", "accelerate",
-                "checkpoint_every", "save_every", "shape_every", "render", "backend_options")
-
-
 def _check_resumable(out: Path, steps: int | None):
     """(scene, config, state, loop state) of a run folder to resume, every piece checked as
     a new run's would be; ModelError (one line) for the first that is not right."""
     try:
-        config = read_json(out / "run.json")
-        missing = [k for k in _CONFIG_KEYS if k not in config]
-        if missing:
-            raise KeyError(", ".join(missing))
-        scene = scene_from_mapping(config["scene"], where=str(out / "run.json"))
+        data = read_json(out / "run.json")
+        if not isinstance(data, dict) or "scene" not in data:
+            raise KeyError("scene")
+        scene = scene_from_mapping(data["scene"], where=str(out / "run.json"))
+        config = RunConfig.from_mapping({k: v for k, v in data.items() if k != "scene"})
     except ModelError as err:
         raise ModelError(f"cannot resume {out}: {err}") from None
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
         raise ModelError(f"cannot resume {out}: run.json is not a run's ({err!r})") from None
-    total_key = "steps" if config["until_steady"] is None else "max_steps"
     try:
-        if not isinstance(config["backend_options"], dict):
-            raise ModelError(f"backend_options must be a table, got {config['backend_options']!r}")
-        for name in ("dt", "perturb"):
-            if not _real(config[name]):
-                raise ModelError(f"{name} must be a number, got {config[name]!r}")
-        check_backend(config["backend"], scene, n=config["n"], dt=config["dt"],
-                      scheme=config["scheme"], constraints=config["constraints"],
-                      allow_underresolved=True, **config["backend_options"])
-        check_loop_options(steps=config["steps"], until_steady=config["until_steady"],
-                           max_steps=config["max_steps"], every=config["every"],
-                           checkpoint_every=config["checkpoint_every"],
-                           save_every=config["save_every"], shape_every=config["shape_every"])
-        if not (config["perturb"] >= 0 and isinstance(config["seed"], int)
-                and config["seed"] >= 0):
-            raise ModelError("perturb must be >= 0 and seed an integer >= 0")
-        if config["adaptive"] is not None:
-            AdaptiveDt(**config["adaptive"])
-    except ModelError as err:
+        config.check(scene, allow_underresolved=True)
+        if steps is not None:  # --steps N: continue to step N (checked as a new run's)
+            config = config.continued_to(steps)
+    except (ModelError, TypeError, ValueError) as err:
         raise ModelError(f"cannot resume {out}: run.json: {err}") from None
-    except (TypeError, ValueError) as err:
-        raise ModelError(f"cannot resume {out}: run.json: {err}") from None
-    if steps is not None:  # --steps N: continue to step N (checked as a new run's)
-        check_loop_options(steps=steps, until_steady=None, max_steps=1, every=1)
-        config[total_key] = steps
     state, ls, identity = read_checkpoint(out)
     if identity != run_identity(scene, config):
         raise ModelError(f"cannot resume {out}: its checkpoint.npz belongs to another run "
@@ -369,21 +301,21 @@ def _check_resumable(out: Path, steps: int | None):
     if not (_real(ls.t) and ls.t >= 0 and _real(ls.dt) and ls.dt > 0):
         raise ModelError(f"cannot resume {out}: the checkpoint's time or time step is not "
                          f"usable (t = {ls.t!r}, dt = {ls.dt!r})")
-    if config[total_key] < ls.k:
-        raise ModelError(f"the checkpoint is at step {ls.k}, past --steps {config[total_key]}")
+    if config.total_steps < ls.k:
+        raise ModelError(f"the checkpoint is at step {ls.k}, past --steps {config.total_steps}")
     check_history(out / "history.csv", ls.k)
     return scene, config, state, ls
 
 
-def run_identity(scene: Scene, config: dict) -> dict:
+def run_identity(scene: Scene, config: RunConfig) -> dict:
     """What a checkpoint must match to be resumed: scene, backend, resolution, options,
     scheme, constraints and a hash of the parameters."""
     import hashlib
 
     params = json.dumps(scene.params.as_dict(), sort_keys=True, default=str)
-    return {"scene": scene.name, "backend": config["backend"], "n": config["n"],
-            "options": config["backend_options"], "scheme": config["scheme"],
-            "constraints": config["constraints"],
+    return {"scene": scene.name, "backend": config.backend, "n": config.n,
+            "options": config.backend_options, "scheme": config.scheme,
+            "constraints": config.constraints,
             "params": hashlib.sha256(params.encode()).hexdigest()[:16]}
 
 
@@ -526,7 +458,7 @@ class WriteFailed(RuntimeError):
     what was kept (the command line's exit 3)."""
 
 
-def _execute(out: Path | None, scene: Scene, config: dict, *, quiet: bool, be: Backend,
+def _execute(out: Path | None, scene: Scene, config: RunConfig, *, quiet: bool, be: Backend,
              start: tuple[dict, LoopState] | None = None, monitor=None) -> RunResult:
     """Run the backend ``be`` as ``config`` says; the one place simulate/resume share.
 
@@ -560,28 +492,29 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
     from .interrupt import critical
 
     start_ls = start[1] if start is not None else None
-    adaptive = AdaptiveDt(**config["adaptive"]) if config["adaptive"] else None
+    adaptive = AdaptiveDt(**config.adaptive) if config.adaptive else None
     columns = HISTORY_COLUMNS + tuple(be.extra_columns) + (("dt",) if adaptive else ())
     writer = series = None
     earlier: list[dict] = []
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         if start is None:
-            write_json_atomic(out / "run.json", config)
+            write_json_atomic(out / "run.json",
+                              {"scene": scene_to_mapping(scene), **config.to_mapping()})
             writer = HistoryWriter(out / "history.csv", columns)
         else:
             earlier = truncate_history(out / "history.csv", start_ls.k)
             writer = HistoryWriter(out / "history.csv", columns, append=True)
         # the ParaView series: the start, every save_every steps, the end
-        series = _Series(out / "phi.xdmf", be, config["save_every"],
+        series = _Series(out / "phi.xdmf", be, config.save_every,
                          None if start is None else start_ls.k)
     identity = run_identity(scene, config)
-    observers = [(config["save_every"], series.save)] if series else []
+    observers = [(config.save_every, series.save)] if series else []
     shapes = None
-    if config.get("shape_every"):
+    if config.shape_every:
         shapes = _Shapes(be, out / "shapes.csv" if out else None, monitor,
                          start_ls.k if start_ls is not None else None)
-        observers.append((config["shape_every"], shapes.observe))
+        observers.append((config.shape_every, shapes.observe))
 
     def checkpoint(ls):
         with critical():
@@ -589,11 +522,11 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
 
     try:
         result = run_loop(
-            be, dt=config["dt"], steps=config["steps"], until_steady=config["until_steady"],
-            max_steps=config["max_steps"], every=config["every"], quiet=quiet, history=writer,
-            label=scene.name, adaptive=adaptive, checkpoint_every=config["checkpoint_every"],
+            be, dt=config.dt, steps=config.steps, until_steady=config.until_steady,
+            max_steps=config.max_steps, every=config.every, quiet=quiet, history=writer,
+            label=scene.name, adaptive=adaptive, checkpoint_every=config.checkpoint_every,
             on_checkpoint=checkpoint if out else None, observers=observers, start=start_ls,
-            accelerate=config.get("accelerate", False))
+            accelerate=config.accelerate)
     finally:
         if writer is not None:
             writer.close()
@@ -627,7 +560,7 @@ def describe_final(be: Backend, final: dict):
     return shape, (grid, surface, d)
 
 
-def _finish(out: Path, be: Backend, result: RunResult, config: dict, series, grid,
+def _finish(out: Path, be: Backend, result: RunResult, config: RunConfig, series, grid,
             rows: list[dict]) -> None:
     """final.npz, the end of the series, summary.json and the pictures."""
     phi_grid, surface, descriptors = grid
@@ -648,10 +581,8 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict, series, gri
         "parameters": be.scene.params.as_dict(),
         "backend": be.name,
         "backend_info": be.info(),
-        **{k: config.get(k) for k in ("n", "dt", "scheme", "constraints", "ic", "perturb",
-                                      "seed")},
-        "adaptive": config["adaptive"],
-        "accelerate": config.get("accelerate", False),
+        **{k: getattr(config, k) for k in ("n", "dt", "scheme", "constraints", "ic",
+                                           "perturb", "seed", "adaptive", "accelerate")},
         "momentum_restarts": result.restarts,
         "steps": result.steps,
         "t": result.t,
@@ -668,14 +599,14 @@ def _finish(out: Path, be: Backend, result: RunResult, config: dict, series, gri
         "versions": package_versions(),
     }
     write_json_atomic(out / "summary.json", summary)
-    if config.get("render", True) and np.all(np.isfinite(phi_grid)) and rows:
+    if config.render and np.all(np.isfinite(phi_grid)) and rows:
         from .render import draw_run, run_label
 
         columns = {c: np.array([float(r.get(c, 0.0)) for r in rows]) for c in rows[0]}
         try:
             draw_run(out, phi_grid, be.scene.params, columns, descriptors, surface=surface,
                      label=run_label(summary, phi_grid.shape[0]),
-                     physical_time=not config.get("accelerate", False))
+                     physical_time=not config.accelerate)
         except Exception as err:  # noqa: BLE001 (a picture must never cost the run's results)
             warnings.warn(f"rendering {out} failed: {err}; the run's results are saved",
                           stacklevel=2)

@@ -329,6 +329,33 @@ def test_api_arguments(tmp_path):
     assert not out.exists()
 
 
+def test_one_run_configuration(tmp_path, cli):
+    """The command line and the API build the same RunConfig; run.json is it (with the scene
+    as run) and reads back to it; a run.json that lacks a choice is refused by name."""
+    from fem_ade import simulate
+    from fem_ade.config import RunConfig
+    from fem_ade.model import ModelError
+    from fem_ade.scenes import SCENES
+
+    r = cli(["sphere", "--n", "16", "--steps", "3", "--allow-underresolved", "--no-render",
+             "--dt", "2e-7", "--out", tmp_path / "cli"])
+    assert r.returncode == 0, r.stderr
+    simulate("sphere", n=16, steps=3, dt=2e-7, allow_underresolved=True, render=False,
+             out=tmp_path / "api")
+    cli_json = json.loads((tmp_path / "cli" / "run.json").read_text())
+    api_json = json.loads((tmp_path / "api" / "run.json").read_text())
+    assert cli_json == api_json
+    config = RunConfig.from_mapping({k: v for k, v in cli_json.items() if k != "scene"})
+    assert config == RunConfig.build(SCENES["sphere"], n=16, steps=3, dt=2e-7, render=False)
+    assert config.to_mapping() == {k: v for k, v in cli_json.items() if k != "scene"}
+    assert config.continued_to(9).steps == 9 and config.total_steps == 3
+    del cli_json["seed"]
+    with pytest.raises(ModelError, match="lacks seed"):
+        RunConfig.from_mapping({k: v for k, v in cli_json.items() if k != "scene"})
+    with pytest.raises(ModelError, match="--dt must be a positive number"):
+        RunConfig.build(SCENES["sphere"], dt=-1.0, adaptive=True)
+
+
 # --- the randomized fault test ----------------------------------------------------------------
 @pytest.mark.slow
 def test_random_kills_resume_bit_for_bit(tmp_path, cli):

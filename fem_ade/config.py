@@ -1,0 +1,179 @@
+"""One run configuration: :class:`RunConfig`, every choice of a run, checked once.
+
+The command line, the Python API (:func:`fem_ade.runs.simulate`), a resume (from
+``run.json``), the studies and a sweep all build the same frozen, validated object; a run
+folder's ``run.json`` is its :meth:`RunConfig.to_mapping` — what was actually run, with the
+scene as run (its resolution and, for ``--ic seeded``, the seeded shape) — and
+:meth:`RunConfig.from_mapping` reads it back with the same checks as a new run's. A value such
+as ``dt`` goes CLI → :class:`RunConfig` → :func:`fem_ade.runs.simulate` → the loop → the
+backend's ``set_dt``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields, replace
+
+import numpy as np
+
+from .model import ModelError, max_stable_dt
+
+
+def _int(value, low: int) -> bool:
+    return (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+            and value >= low)
+
+
+def _real(value) -> bool:
+    """A real, finite number (not a bool)."""
+    return (isinstance(value, (int, float, np.integer, np.floating))
+            and not isinstance(value, bool) and math.isfinite(float(value)))
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Every choice of a run but its scene and output folder (``fem_ade.runs.simulate``'s
+    keyword arguments, with the scene's defaults filled in by :meth:`build`).
+
+    ``steps`` or ``until_steady`` (with ``max_steps``) says how long; ``every`` how often a
+    history row is recorded; ``adaptive``: the fields of :class:`fem_ade.loop.AdaptiveDt` or
+    None; ``backend_options``: the backend's own (``fem_ade.registry.BACKENDS``).
+    """
+
+    backend: str
+    n: int
+    dt: float
+    steps: int | None = None
+    until_steady: float | None = None
+    max_steps: int = 100_000
+    every: int = 10
+    ic: str = "consistent"
+    perturb: float = 0.0
+    seed: int = 0
+    scheme: str = "paper"
+    constraints: str = "penalty"
+    adaptive: dict | None = None
+    accelerate: bool = False
+    checkpoint_every: int | None = None
+    save_every: int | None = None
+    shape_every: int | None = None
+    render: bool = True
+    backend_options: dict = field(default_factory=dict)
+
+    # -- building ---------------------------------------------------------------------------
+    @classmethod
+    def build(cls, scene, *, backend: str = "fem", n: int | None = None,
+              dt: float | None = None, steps: int | None = None,
+              until_steady: float | None = None, adaptive: bool | dict = False,
+              backend_options: dict | None = None, **kwargs) -> RunConfig:
+        """A run of ``scene``: its defaults filled in (the backend's n for the scene, the
+        scene's Δt and steps), ``adaptive=True`` made concrete (Δt in [Δt/1000, 1000Δt],
+        below ε³/κ with the paper's scheme), and every value checked (ModelError, one
+        line; TypeError for a value of the wrong kind)."""
+        from .backend import backend_class
+        from .loop import AdaptiveDt
+
+        if backend_options is not None and not isinstance(backend_options, dict):
+            raise TypeError(f"backend_options must be a dict, got "
+                            f"{type(backend_options).__name__}")
+        for name, value in (("dt", dt), ("until_steady", until_steady)):
+            if value is not None and (isinstance(value, bool) or not isinstance(
+                    value, (int, float, np.integer, np.floating))):
+                raise ModelError(f"{name} must be a number, got {value!r}")
+        options = dict(backend_options or {})
+        if n is None:  # the scene's resolution, as the backend counts it
+            n = backend_class(backend).default_n(scene, **options)
+        dt = scene.dt if dt is None else dt
+        if steps is None and until_steady is None:
+            steps = scene.steps
+        scheme = kwargs.get("scheme", "paper")
+        if adaptive is True:
+            if not (_real(dt) and dt > 0):
+                raise ModelError(f"--dt must be a positive number, got {dt}")
+            dt_max = 1000 * dt if scheme == "stabilized" else min(
+                1000 * dt, 0.9 * max_stable_dt(scene.params))
+            adaptive = {"dt_min": dt / 1000, "dt_max": max(dt, dt_max)}
+        adaptive = asdict(AdaptiveDt(**adaptive)) if adaptive else None
+        return cls(backend=backend, n=n, dt=dt, steps=steps, until_steady=until_steady,
+                   adaptive=adaptive, backend_options=options, **kwargs)
+
+    def with_(self, **changes) -> RunConfig:
+        return replace(self, **changes)
+
+    # -- checks -----------------------------------------------------------------------------
+    def check(self, scene, *, allow_underresolved: bool = False) -> None:
+        """Everything a run needs of its configuration, before anything is built or
+        written: the backend and its options against the scene (resolution, Δt, memory), the
+        loop's numbers, the perturbation, momentum without adaptive Δt."""
+        from .backend import check_backend
+        from .loop import AdaptiveDt
+
+        if not isinstance(self.backend_options, dict):
+            raise ModelError(f"backend_options must be a table, got {self.backend_options!r}")
+        if not _real(self.perturb) or self.perturb < 0:
+            raise ModelError(f"--perturb must be a number >= 0, got {self.perturb!r}")
+        if not _int(self.seed, 0):
+            raise ModelError(f"--seed must be an integer >= 0, got {self.seed!r}")
+        check_backend(self.backend, scene, n=self.n, dt=self.dt, scheme=self.scheme,
+                      constraints=self.constraints, allow_underresolved=allow_underresolved,
+                      **self.backend_options)
+        check_loop_options(steps=self.steps, until_steady=self.until_steady,
+                           max_steps=self.max_steps, every=self.every,
+                           checkpoint_every=self.checkpoint_every,
+                           save_every=self.save_every, shape_every=self.shape_every)
+        if self.adaptive is not None:
+            if not isinstance(self.adaptive, dict):
+                raise ModelError(f"adaptive must be a table, got {self.adaptive!r}")
+            try:
+                AdaptiveDt(**self.adaptive)
+            except TypeError as err:
+                raise ModelError(f"adaptive: {err}") from None
+        if self.accelerate and self.adaptive:
+            raise ModelError("--accelerate and --adaptive do not go together (momentum needs a "
+                             "fixed step map)")
+        for name in ("accelerate", "render"):
+            if not isinstance(getattr(self, name), bool):
+                raise ModelError(f"{name} must be true or false, got {getattr(self, name)!r}")
+
+    @property
+    def total_steps(self) -> int:
+        """The step the run ends at the latest (``steps``, or ``max_steps`` to a steady state)."""
+        return self.steps if self.until_steady is None else self.max_steps
+
+    def continued_to(self, steps: int) -> RunConfig:
+        """The same run, to step ``steps`` (a resume's --steps)."""
+        check_loop_options(steps=steps, until_steady=None, max_steps=1, every=1)
+        key = "steps" if self.until_steady is None else "max_steps"
+        return replace(self, **{key: steps})
+
+    # -- run.json ---------------------------------------------------------------------------
+    def to_mapping(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_mapping(cls, data) -> RunConfig:
+        """The configuration of a run.json (ModelError if a key is missing or unknown; the
+        values are checked by :meth:`check`)."""
+        if not isinstance(data, dict):
+            raise ModelError(f"a run configuration must be a table, got {type(data).__name__}")
+        names = {f.name for f in fields(cls)}
+        missing = sorted(names - set(data))
+        if missing:
+            raise ModelError(f"run.json lacks {', '.join(missing)}")
+        return cls(**{k: data[k] for k in names})
+
+
+def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_every=None,
+                       save_every=None, shape_every=None) -> None:
+    """The loop's numbers, before anything is written (ModelError, one line)."""
+    if (steps is None) == (until_steady is None):
+        raise ModelError("give exactly one of steps and until_steady")
+    for name, value, low in (("steps", steps, 1), ("max-steps", max_steps, 1),
+                             ("every", every, 1), ("checkpoint-every", checkpoint_every, 1),
+                             ("save-every", save_every, 1), ("shape-every", shape_every, 1)):
+        if value is None:
+            continue
+        if not _int(value, low):
+            raise ModelError(f"--{name} must be an integer >= {low}, got {value}")
+    if until_steady is not None and not (_real(until_steady) and until_steady > 0):
+        raise ModelError(f"--until-steady must be a positive number, got {until_steady}")
