@@ -171,6 +171,12 @@ class BackendBase:
         return scene.n
 
     @classmethod
+    def nodes_per_axis(cls, n: int, **options) -> int | None:
+        """The grid points per axis of a run with this n (None: not a tensor grid); the
+        inverse of :meth:`default_n`, so that a run's scene records its grid."""
+        return n
+
+    @classmethod
     def min_cells(cls, **options) -> int:
         """The smallest n a run takes (a grid of 8 points per axis)."""
         return 8

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .backend import Backend, make_backend
+from .backend import Backend, backend_class, make_backend
 from .config import RunConfig
 from .initial import FieldIC, check_grid_field
 from .loop import AdaptiveDt, LoopState, RunResult, run_loop
@@ -160,6 +160,7 @@ def simulate(
             scene = scene.with_(ic=FieldIC(grid=initial))
         scene.ic.check(scene.dim)
     config.check(scene, allow_underresolved=allow_underresolved)
+    scene = scene_as_run(scene, config)
     out = check_out_dir(out, force=force) if out is not None else None
     be = build_backend(scene, config)  # checks the initial field, writes nothing
     if dry_run:
@@ -190,6 +191,21 @@ def _real(value) -> bool:
     """A real, finite number (not a bool)."""
     return (isinstance(value, (int, float, np.integer, np.floating))
             and not isinstance(value, bool) and math.isfinite(float(value)))
+
+
+def scene_as_run(scene: Scene, config: RunConfig) -> Scene:
+    """The scene as ``config`` runs it, as run.json records it: its grid the run's (points
+    per axis, so that the backend's default n for it is ``config.n``) and, with
+    ``ic="seeded"``, its initial shape the seeded one (:mod:`fem_ade.seeds`)."""
+    changes = {}
+    nodes = backend_class(config.backend).nodes_per_axis(config.n, **config.backend_options)
+    if nodes is not None and nodes != scene.n:
+        changes["n"] = nodes
+    if config.ic == "seeded" and not scene.ic.is_field:
+        from .seeds import seeded_shape
+
+        changes["ic"] = seeded_shape(scene.name)
+    return scene.with_(**changes) if changes else scene
 
 
 def _scene_argument(scene) -> Scene:

@@ -354,6 +354,16 @@ def test_one_run_configuration(tmp_path, cli):
         RunConfig.from_mapping({k: v for k, v in cli_json.items() if k != "scene"})
     with pytest.raises(ModelError, match="--dt must be a positive number"):
         RunConfig.build(SCENES["sphere"], dt=-1.0, adaptive=True)
+    # the scene as run: a seeded FEM run of order 2 on 8 cells records the torus it started
+    # from and its 16 points per axis, whose default n is the run's again
+    from fem_ade.scenes import scene_from_mapping
+
+    simulate("torus", backend="fem", n=8, steps=1, ic="seeded", allow_underresolved=True,
+             render=False, backend_options={"order": 2}, out=tmp_path / "seeded")
+    run = json.loads((tmp_path / "seeded" / "run.json").read_text())
+    assert run["scene"]["ic"]["kind"] == "torus" and run["scene"]["n"] == 16
+    recorded = scene_from_mapping(run["scene"])
+    assert RunConfig.build(recorded, backend="fem", backend_options={"order": 2}).n == 8
 
 
 # --- the randomized fault test ----------------------------------------------------------------

@@ -114,6 +114,11 @@ class FEMBackend(BackendBase):
         return max(fmesh.MIN_CELLS, round(scene.n / int(order)))
 
     @classmethod
+    def nodes_per_axis(cls, n: int, *, order: int = 1, mesh=None, **options) -> int | None:
+        """p·n on a tensor mesh (uniform or graded); None for a mesh file."""
+        return int(order) * n if fmesh.parse_option(mesh)[0] in ("uniform", "graded") else None
+
+    @classmethod
     def min_cells(cls, *, order: int = 1, **options) -> int:
         """At least 3 cells per axis (a periodic mesh) and 8 nodes (p·n ≥ 8)."""
         if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 1:
