@@ -422,7 +422,7 @@ def archive(root: Path) -> dict:
                     entries[_key(v, b, n)] = a
                     changed = True
                 png, thumb = folder / "shape.png", _thumb(root, v, b, n)
-                if png.is_file() and (not thumb.is_file()
+                if b in BACKENDS and png.is_file() and (not thumb.is_file()  # the montages
                                       or thumb.stat().st_mtime < png.stat().st_mtime):
                     thumb.parent.mkdir(parents=True, exist_ok=True)
                     with Image.open(png) as im:
@@ -657,6 +657,28 @@ def write_verdicts(verdicts: dict) -> None:
     """fem_ade/verdicts.json: per scene, its headline verdict and every run's (merged with
     what is there, so a partial gallery run keeps the others)."""
     old = json.loads(VERDICTS.read_text()) if VERDICTS.is_file() else {}
+    VERDICTS.write_text(json.dumps(merged_verdicts(verdicts, old), indent=1, sort_keys=True)
+                        + "\n")
+
+
+def archived_verdicts(root: Path = RESULTS) -> dict:
+    """{(variant, backend, scene): verdict} of every run in ``root``'s archive (the
+    gallery's two backends; what fem_ade/verdicts.json is made of)."""
+    from fem_ade.scenes import PAPER_SCENES
+
+    entries = json.loads((root / ARCHIVE).read_text())
+    out = {}
+    for key, a in entries.items():
+        v, b, n = key.split("/")
+        if b in BACKENDS:
+            out[(v, b, n)] = verdict(a, PAPER_SCENES[n].shape, v)
+    return out
+
+
+def merged_verdicts(verdicts: dict, old: dict) -> dict:
+    """``old`` (verdicts.json's content) with ``verdicts`` merged in and the headlines
+    rewritten."""
+    old = json.loads(json.dumps(old))
     for (v, b, n), text in verdicts.items():
         old.setdefault(n, {"runs": {}})["runs"][f"{v} ({b})"] = text
     for entry in old.values():
@@ -669,7 +691,7 @@ def write_verdicts(verdicts: dict) -> None:
             entry["headline"] += f"; paper's recipe (a): {paper}"
         if "d (spectral)" in entry["runs"]:  # the sharp-interface check, where it ran
             entry["headline"] += f"; with eps halved (d): {entry['runs']['d (spectral)']}"
-    VERDICTS.write_text(json.dumps(old, indent=1, sort_keys=True) + "\n")
+    return old
 
 
 def montage(root: Path, data, names, backend, variants) -> Path | None:
