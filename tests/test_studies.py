@@ -287,3 +287,14 @@ def test_gallery_keeps_an_interrupted_run(tmp_path, monkeypatch):
         gallery.run_case(tmp_path, case, quiet=True, keep=False)
     assert (folder / "checkpoint.npz").is_file()
     assert not (folder / "analysis.json").exists()
+
+
+def test_package_verdicts_are_the_committed_gallerys():
+    """fem_ade/verdicts.json (what ``python -m fem_ade.run --list`` shows) is made from the
+    committed gallery's archive by ``studies/gallery.py --report-only``: no verdict there
+    that the archive does not give, none missing."""
+    import json
+
+    gallery = _load(STUDIES / "gallery.py")
+    made = gallery.merged_verdicts(gallery.archived_verdicts(), {})
+    assert made == json.loads(gallery.VERDICTS.read_text())
