@@ -24,6 +24,9 @@ starfish     centre, arms, length, radius, core, plane (default true), axis (def
 discocyte    centre, axis (default z), diameter, c0, c2, c4: the Evans–Fung red-cell profile
              z(ρ) = ±½ d √(1 − ξ²)(c0 + c2 ξ² + c4 ξ⁴), ξ = 2ρ/d (defaults: the human
              red cell, c0 = 0.0518, c2 = 2.0026, c4 = −4.491, in units of d)
+meridian     centre, axis (default z), r, z, scale: the surface of revolution of a meridian
+             (r, z) × scale, pole to pole or a closed loop (a torus); ``python -m sharp_ref
+             BRANCH --v V --json`` prints one (R₀ = 1: scale is R₀ in the box)
 file         path: φ of an earlier run (its folder, final.npz, or an .npz with ``phi_grid`` or
              ``phi`` on a uniform grid), resampled by periodic cubic splines
 ===========  ==================================================================================
@@ -110,7 +113,7 @@ class Shape:
     and ``scale`` the typical size of s (the unit of ``--perturb``)."""
 
     kind: ClassVar[str] = ""
-    #: field name -> "vec" | "vecs" | "float+" (positive) | "floats+" | "int+" | "bool" |
+    #: field name -> "vec" | "vecs" | "float+" (positive) | "floats+" | "floats" | "int+" | "bool" |
     #: "signs" | "float" | "str"
     spec: ClassVar[dict] = {}
     #: fields that may be left out (with their defaults)
@@ -145,6 +148,8 @@ class Shape:
                 raise ModelError(f"ic.{name} must be a positive number, got {value}")
             elif kind == "floats+" and not all(math.isfinite(v) and v > 0 for v in value):
                 raise ModelError(f"ic.{name} must be positive numbers, got {list(value)}")
+            elif kind == "floats" and not all(math.isfinite(v) for v in value):
+                raise ModelError(f"ic.{name} must be finite numbers, got {list(value)}")
             elif kind == "int+" and not value >= 1:
                 raise ModelError(f"ic.{name} must be a positive integer, got {value}")
             elif kind == "float" and not math.isfinite(value):
@@ -381,6 +386,76 @@ class Discocyte(Shape):
 
 
 @dataclass(frozen=True)
+class Meridian(Shape):
+    """A surface of revolution about ``axis`` through ``centre``, given by its meridian: the
+    points (r, z) in a half plane (r ≥ 0 the distance from the axis, z along it), in units
+    of ``scale``: ``python -m sharp_ref ... --json`` prints them for R₀ = 1, so ``scale`` is
+    the vesicle's R₀ = √(A/4π) in the box. A spheroidal meridian runs from one pole (r = 0)
+    to the other; one that starts off the axis is a closed loop (a torus's tube). s is the
+    signed distance to the surface (positive inside)."""
+
+    kind: ClassVar[str] = "meridian"
+    spec: ClassVar[dict] = {"centre": "vec", "axis": "vec", "r": "floats", "z": "floats",
+                            "scale": "float+"}
+    optional: ClassVar[tuple[str, ...]] = ("axis",)
+    centre: tuple[float, ...]
+    r: tuple[float, ...]
+    z: tuple[float, ...]
+    scale: float
+    axis: tuple[float, ...] = (0.0, 0.0, 1.0)
+
+    def check(self, dim):
+        if dim != 3:
+            raise ModelError("ic kind 'meridian' needs a 3D scene")
+        super().check(dim)
+        if len(self.r) != len(self.z) or len(self.r) < 4:
+            raise ModelError(f"ic.r and ic.z need the same number (≥ 4) of points, got "
+                             f"{len(self.r)} and {len(self.z)}")
+        if min(self.r) < 0:
+            raise ModelError(f"ic.r must be ≥ 0 (distances from the axis), got {min(self.r)}")
+        if self.spheroidal and not (self.r[0] < 1e-9 and self.r[-1] < 1e-9):
+            raise ModelError("a meridian that starts on the axis must end on it")
+
+    @property
+    def spheroidal(self) -> bool:
+        return self.r[0] < 1e-9
+
+    def _polygon(self) -> np.ndarray:
+        """The closed polygon (r, z) the meridian bounds with the axis, in box units."""
+        p = self.scale * np.stack([self.r, self.z], axis=1)
+        if self.spheroidal:  # the poles on the axis exactly (the axis is an edge)
+            p[0, 0] = p[-1, 0] = 0.0
+        return np.vstack([p, p[:1]])
+
+    def level(self, points, L, variant="consistent"):
+        d = _offsets(points, self.centre, L)
+        n = _unit(self.axis, 3)
+        h = _along(d, n)
+        rho = np.sqrt(np.maximum(np.sum(d * d, axis=0) - h * h, 0.0))
+        poly = self._polygon()
+        last = len(poly) - 2 if self.spheroidal else len(poly) - 1  # the axis is no surface
+        dist = np.full(rho.shape, np.inf)
+        inside = np.zeros(rho.shape, dtype=bool)
+        for (r1, z1), (r2, z2), k in zip(poly[:-1], poly[1:], range(len(poly) - 1),
+                                         strict=True):
+            if k < last:
+                dr, dz = r2 - r1, z2 - z1
+                t = np.clip(((rho - r1) * dr + (h - z1) * dz) / max(dr * dr + dz * dz, 1e-300),
+                            0.0, 1.0)
+                dist = np.minimum(dist, np.hypot(rho - r1 - t * dr, h - z1 - t * dz))
+            crosses = (z1 > h) != (z2 > h)  # even-odd rule along a ray of growing r
+            with np.errstate(divide="ignore", invalid="ignore"):
+                at = r1 + (h - z1) * (r2 - r1) / (z2 - z1)
+            inside ^= crosses & (rho < at)
+        return np.where(inside, dist, -dist), self.scale
+
+    def volume_estimate(self, variant="consistent"):
+        p = self._polygon()
+        (r1, z1), (r2, z2) = p[:-1].T, p[1:].T
+        return abs(float(np.sum(math.pi / 3.0 * (z2 - z1) * (r1 * r1 + r1 * r2 + r2 * r2))))
+
+
+@dataclass(frozen=True)
 class FieldIC(Shape):
     """φ of an earlier run (``path``) or an array (``grid``), resampled to the new points."""
 
@@ -409,7 +484,7 @@ class FieldIC(Shape):
 
 
 KINDS: dict[str, type[Shape]] = {c.kind: c for c in (Ellipsoid, Sphere, Torus, Spheres, Capsule,
-                                                     Starfish, Discocyte, FieldIC)}
+                                                     Starfish, Discocyte, Meridian, FieldIC)}
 
 
 def from_field(phi: np.ndarray, path: str = "") -> FieldIC:
@@ -517,7 +592,7 @@ def _parse(name: str, kind: str, value):
                 isinstance(v, list) and v and all(_number(x) for x in v) for v in value)):
             raise bad
         return tuple(tuple(float(x) for x in v) for v in value)
-    if kind in ("floats+", "signs"):
+    if kind in ("floats+", "floats", "signs"):
         if not (isinstance(value, list) and value and all(_number(v) for v in value)):
             raise bad
         return tuple(int(v) if kind == "signs" else float(v) for v in value)
@@ -539,7 +614,8 @@ def _parse(name: str, kind: str, value):
 
 
 _WHAT = {"vec": "a list of numbers", "vecs": "a list of lists of numbers",
-         "floats+": "a list of positive numbers", "signs": "a list of +1 and -1",
+         "floats+": "a list of positive numbers", "floats": "a list of numbers",
+         "signs": "a list of +1 and -1",
          "float+": "a positive number", "float": "a number", "int+": "a positive integer",
          "bool": "true or false", "str": "a string"}
 

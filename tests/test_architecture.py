@@ -82,11 +82,11 @@ def test_readme_and_ci_run_the_same_tests():
 
 
 def _module_graph() -> dict[str, set[str]]:
-    """Every module of fem_ade and spectral_ref → the modules of the two it imports, at the
-    top or inside a function (a lazy import is still a dependency)."""
+    """Every module of fem_ade, spectral_ref and sharp_ref → the modules of the three it
+    imports, at the top or inside a function (a lazy import is still a dependency)."""
     root = PACKAGE.parent
     files = {}
-    for pkg in ("fem_ade", "spectral_ref"):
+    for pkg in ("fem_ade", "spectral_ref", "sharp_ref"):
         for path in (root / pkg).rglob("*.py"):
             parts = list(path.relative_to(root).with_suffix("").parts)
             if parts[-1] == "__init__":
@@ -151,3 +151,27 @@ def test_spectral_reference_shares_no_physics():
                 for a in node.names}
     assert imported <= {"BackendBase", "fft_workers", "ModelError", "ConstraintError",
                         "closed_grid_values", "grid_mesh"}, imported
+
+
+def test_sharp_reference_imports_nothing_of_the_phase_field():
+    """sharp_ref (the axisymmetric sharp membrane) stands on numpy and scipy alone: nothing
+    of fem_ade or spectral_ref, lazily or not."""
+    graph = _module_graph()
+    mods = [m for m in graph if m.startswith("sharp_ref")]
+    assert len(mods) >= 3, mods
+    used = {d for m in mods for d in graph[m] if not d.startswith("sharp_ref")}
+    assert not used, used
+    for m in mods:
+        path = PACKAGE.parent / (m.replace(".", "/") + ".py")
+        if not path.is_file():
+            path = PACKAGE.parent / m.replace(".", "/") / "__init__.py"
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and not node.level:
+                assert node.module.split(".")[0] in {"numpy", "scipy", "__future__", "math",
+                                                      "argparse", "json", "sys", "dataclasses",
+                                                      "warnings", "threadpoolctl"}, (m, node.module)
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    assert a.name.split(".")[0] in {"numpy", "scipy", "math", "argparse",
+                                                    "json", "sys", "warnings",
+                                                    "threadpoolctl"}, (m, a.name)

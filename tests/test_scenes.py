@@ -104,3 +104,52 @@ def test_toml_errors(tmp_path, text, match):
     f.write_text(text)
     with pytest.raises(ModelError, match=match):
         load_scene_file(f)
+
+
+def test_meridian_initial_condition(tmp_path):
+    """The ``meridian`` kind is the signed distance to a surface of revolution: a half
+    circle gives the sphere's, a closed loop the torus's (to the polyline's chord error), and
+    a scene file takes one (as ``python -m sharp_ref ... --json`` prints it)."""
+    from fem_ade.initial import Meridian, Sphere, Torus, ic_from_mapping
+
+    m = 48
+    x = np.arange(m) / m
+    P = np.array(np.meshgrid(x, x, x, indexing="ij"))
+    th = np.linspace(0.0, math.pi, 201)
+    ball = ic_from_mapping({"kind": "meridian", "centre": [0.5, 0.5, 0.5],
+                            "r": np.sin(th).tolist(), "z": np.cos(th).tolist(), "scale": 0.3}, 3)
+    s, _ = ball.level(P, 1.0)
+    assert np.abs(s - Sphere((0.5, 0.5, 0.5), 0.3).level(P, 1.0)[0]).max() < 2e-5
+    assert math.isclose(ball.volume_estimate(), 4 / 3 * math.pi * 0.3**3, rel_tol=1e-3)
+    a = 0.1
+    ph = np.linspace(0.0, 2 * math.pi, 400, endpoint=False)
+    ring = Meridian(centre=(0.3, 0.5, 0.5), r=tuple(math.sqrt(2) * a + a * np.cos(ph)),
+                    z=tuple(a * np.sin(ph)), scale=1.0, axis=(1.0, 0.0, 0.0))
+    ring.check(3)
+    t, _ = ring.level(P, 1.0)
+    torus = Torus((0.3, 0.5, 0.5), math.sqrt(2) * a, a, axis=(1.0, 0.0, 0.0))
+    assert np.abs(t - torus.level(P, 1.0)[0]).max() < 1e-5
+    f = tmp_path / "prolate.toml"
+    f.write_text('dt = 1e-6\nn = 16\n[params]\neps = 0.05\nalpha = 0.05\nbeta = 0.7\n'
+                 'effects = ["bending", "volume", "area"]\n[ic]\nkind = "meridian"\n'
+                 'centre = [0.5, 0.5, 0.5]\nr = [0.0, 0.5, 0.6, 0.5, 0.0]\n'
+                 'z = [1.2, 0.8, 0.0, -0.8, -1.2]\nscale = 0.2\n')
+    s = load_scene_file(f)
+    phi = s.initial_phi(P)
+    assert phi[24, 24, 24] > 0.9 and phi[0, 0, 0] < -0.99
+    assert phi[24, 24, 24 + 10] > 0 > phi[24 + 10, 24, 24]  # longer along z than across
+
+
+@pytest.mark.parametrize("table, match", [
+    ({"r": [0.0, 1.0, 0.0], "z": [1.0, 0.0, -1.0]}, "≥ 4"),
+    ({"r": [0.0, 1.0, 1.0, 0.0], "z": [1.0, 0.0, -1.0]}, "same number"),
+    ({"r": [0.0, -1.0, 1.0, 0.0], "z": [1.0, 0.5, -0.5, -1.0]}, "≥ 0"),
+    ({"r": [0.0, 1.0, 1.0, 0.5], "z": [1.0, 0.5, -0.5, -1.0]}, "end on it"),
+    ({"r": [0.0, 1.0, 1.0, 0.0], "z": [1.0, 0.5, -0.5, "x"]}, "list of numbers"),
+])
+def test_meridian_bad_input(table, match):
+    from fem_ade.initial import ic_from_mapping
+
+    with pytest.raises(ModelError, match=match):
+        ic_from_mapping({"kind": "meridian", "centre": [0.5, 0.5, 0.5], "scale": 0.2, **table},
+                        3)

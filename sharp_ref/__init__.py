@@ -1,0 +1,1 @@
+"""sharp_ref: axisymmetric sharp-interface membranes, an independent reference."""
