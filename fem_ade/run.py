@@ -384,6 +384,8 @@ def _report(scene, backend: str, result, out) -> int:
         v = verdict(scene, d)
         if v is not None:
             print(f"  {v['line']}")
+        if d.get("sharp_reference"):
+            print(f"  {d['sharp_reference']['line']}")
     print(f"  results in {out}/ ({', '.join(_listing(Path(out)))})")
     return result.exit_code
 

@@ -551,6 +551,10 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
     result.shapes = shapes.rows if shapes is not None else []
     result.setup_cpu_s = getattr(be, "setup_cpu_s", 0.0) if start is None else 0.0
     result.shape, grid = describe_final(be, result.final)
+    if result.shape is not None and result.status != "diverged":
+        from .sharp import compare
+
+        result.shape["sharp_reference"] = compare(be.scene.params, result.shape, result.final)
     result.final_grid = grid[0]
     if out is not None:
         with critical():  # a signal now waits for the run's last files
@@ -609,6 +613,7 @@ def _finish(out: Path, be: Backend, result: RunResult, config: RunConfig, series
         "final": result.final,
         "shape": result.shape,
         "verdict": verdict(be.scene, result.shape),
+        "sharp_reference": (result.shape or {}).get("sharp_reference"),
         "wall_s": result.wall_s,
         "cpu_s": result.cpu_s,
         "setup_cpu_s": getattr(be, "setup_cpu_s", None),

@@ -134,3 +134,25 @@ def test_oblate_stomatocyte_transition():
     """… and the stomatocyte below v ≈ 0.592."""
     v = _crossing("oblate", "stomatocyte", [0.58, 0.60])
     assert abs(v - 0.592) < 0.005, v
+
+
+def test_a_run_meets_its_sharp_shape():
+    """fem_ade.sharp.compare: a final shape labelled prolate at v = 0.8 is set beside the sharp
+    prolate there (e = 1.38744), with the run's e = (W + G)/(16√2πκ/3); no comparison for a
+    shape without a branch or of several bodies; a branch missing there is said so."""
+    from fem_ade.model import Params
+    from fem_ade.sharp import SPHERE_W, compare
+
+    p = Params(eps=0.02, alpha=0.02, beta=0.5, effects={"bending", "volume", "area"})
+    shape = {"components": 1, "label": "prolate",
+             "sharp": {"A": 4 * math.pi * 0.2**2, "reduced_volume": 0.8}}
+    out = compare(p, shape, {"W": 1.45 * SPHERE_W, "G": 0.0})
+    assert out["branch"] == "prolate" and abs(out["e_sharp"] - 1.387440432) < 1e-6
+    assert abs(out["rel_diff"] - (1.45 / out["e_sharp"] - 1.0)) < 1e-12
+    assert abs(out["eps_over_R0"] - 0.1) < 1e-12
+    assert "sharp prolate at v = 0.800: e = 1.387; this run 1.45 (+4.5% at ε = 0.02" in out["line"]
+    assert compare(p, {**shape, "label": "sphere"}, {"W": 1.0}) is None
+    assert compare(p, {**shape, "components": 2}, {"W": 1.0}) is None
+    missing = compare(p, {**shape, "label": "oblate", "sharp": {"A": 0.5, "reduced_volume": 0.45}},
+                      {"W": 1.0})
+    assert "missing" in missing and "no sharp oblate at v = 0.450" in missing["line"]

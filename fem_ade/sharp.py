@@ -1,0 +1,64 @@
+"""The sharp membrane a run's final shape stands for, and how far the run is from it.
+
+Where a run ends as one body whose label names an axisymmetric branch of :mod:`sharp_ref`
+(prolate, cylinder or gourd → ``prolate``; oblate or discocyte → ``oblate``; torus →
+``torus``), :func:`compare` solves that branch at the reduced volume of the run's φ = 0
+surface with the run's model — bending, spontaneous curvature c = √2·C·R₀, and with ADE
+κ̄/κ and m₀ = ΔA₀/(8πDR₀), R₀ = √(A/4π) of that surface — and sets the run's energy
+e = (W + G)/(16√2πκ/3) beside the sharp one (both in units of a sphere's bending energy; they
+agree as ε → 0, docs/model.md §8). A branch that does not exist there is said so.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+from .model import Params
+
+#: shape label (fem_ade.shape.classify) → sharp_ref branch
+BRANCH_OF_LABEL = {"prolate": "prolate", "cylinder": "prolate", "gourd": "prolate",
+                   "oblate": "oblate", "discocyte": "oblate", "torus": "torus"}
+#: a sphere's bending energy in the model's units, per κ
+SPHERE_W = 16.0 * math.sqrt(2.0) * math.pi / 3.0
+
+
+@lru_cache(maxsize=64)
+def _solve(branch: str, v: float, m0: float, kbar: float, c: float):
+    from sharp_ref.branches import LEVELS, solve
+
+    return solve(branch, v, m0=m0, kbar=kbar, c=c, tol=1e-7, levels=LEVELS[:2])
+
+
+def compare(params: Params, shape: dict | None, final: dict) -> dict | None:
+    """The sharp reference of the run's final shape (None where there is none to compare
+    with): ``branch``, ``v``, ``e_sharp``, ``e_run``, ``rel_diff``, ``eps`` and ``line``; or
+    ``branch``, ``v`` and ``missing`` (why there is no sharp shape there)."""
+    if not shape or shape.get("components") != 1:
+        return None
+    branch = BRANCH_OF_LABEL.get(shape.get("label", ""))
+    sharp = shape.get("sharp") or {}
+    area, v = sharp.get("A"), sharp.get("reduced_volume")
+    if branch is None or not area or not v or not math.isfinite(v):
+        return None
+    R0 = math.sqrt(area / (4.0 * math.pi))
+    kbar = params.kappa_bar / params.kappa if params.on("ade") else 0.0
+    m0 = params.delta_A0 / (8.0 * math.pi * params.D * R0) if kbar else 0.0
+    c = math.sqrt(2.0) * params.C * R0 if params.on("spontaneous_curvature") else 0.0
+    v = round(float(v), 4)
+    out = {"branch": branch, "v": v, "eps": params.eps, "eps_over_R0": params.eps / R0}
+    from sharp_ref.membrane import BranchError
+
+    try:
+        result = _solve(branch, v, round(m0, 4), round(kbar, 6), round(c, 4))
+    except (BranchError, ValueError) as err:
+        out["missing"] = str(err)
+        out["line"] = f"no sharp {branch} at v = {v:.3f} to compare with ({err})"
+        return out
+    e_run = (final["W"] + final.get("G", 0.0)) / (SPHERE_W * params.kappa)
+    out.update(e_sharp=result.e, e_run=e_run, rel_diff=e_run / result.e - 1.0,
+               da_sharp=result.da)
+    out["line"] = (f"sharp {branch} at v = {v:.3f}: e = {result.e:.4g}; this run "
+                   f"{e_run:.4g} ({out['rel_diff']:+.1%} at ε = {params.eps:g}, "
+                   f"ε/R₀ = {out['eps_over_R0']:.2f})")
+    return out
