@@ -68,6 +68,14 @@ def _along(d: np.ndarray, axis: np.ndarray) -> np.ndarray:
     return np.tensordot(axis, d, axes=1)
 
 
+def _about_axis(points: np.ndarray, centre, axis, L: float) -> tuple[np.ndarray, np.ndarray]:
+    """(ρ, h): the distance of each point from the line through ``centre`` along ``axis``
+    and its height along it (3D, periodic minimum image)."""
+    d = _offsets(points, centre, L)
+    h = _along(d, _unit(axis, 3))
+    return np.sqrt(np.maximum(np.sum(d * d, axis=0) - h * h, 0.0)), h
+
+
 def _segment_distance(d: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance from the points at offsets d (dim, ...) to the segment from a to b."""
     ab = b - a
@@ -230,10 +238,7 @@ class Torus(Shape):
             raise ModelError(f"ic torus needs r < R (a hole), got R = {self.R}, r = {self.r}")
 
     def level(self, points, L, variant="consistent"):
-        d = _offsets(points, self.centre, L)
-        n = _unit(self.axis, 3)
-        h = _along(d, n)
-        rho = np.sqrt(np.maximum(np.sum(d * d, axis=0) - h * h, 0.0))
+        rho, h = _about_axis(points, self.centre, self.axis, L)
         return self.r - np.sqrt((rho - self.R) ** 2 + h * h), self.r
 
     def volume_estimate(self, variant="consistent"):
@@ -371,10 +376,8 @@ class Discocyte(Shape):
     def level(self, points, L, variant="consistent"):
         from scipy.spatial import cKDTree
 
-        d = _offsets(points, self.centre, L)
-        n = _unit(self.axis, 3)
-        z = np.abs(_along(d, n))
-        rho = np.sqrt(np.maximum(np.sum(d * d, axis=0) - z * z, 0.0))
+        rho, z = _about_axis(points, self.centre, self.axis, L)
+        z = np.abs(z)
         half = 0.5 * self.diameter
         # the signed distance to the profile curve in the (ρ, |z|) half-plane, the curve
         # sampled densely (ξ = sin θ crowds the samples at the rim)
@@ -428,10 +431,7 @@ class Meridian(Shape):
         return np.vstack([p, p[:1]])
 
     def level(self, points, L, variant="consistent"):
-        d = _offsets(points, self.centre, L)
-        n = _unit(self.axis, 3)
-        h = _along(d, n)
-        rho = np.sqrt(np.maximum(np.sum(d * d, axis=0) - h * h, 0.0))
+        rho, h = _about_axis(points, self.centre, self.axis, L)
         poly = self._polygon()
         last = len(poly) - 2 if self.spheroidal else len(poly) - 1  # the axis is no surface
         dist = np.full(rho.shape, np.inf)
