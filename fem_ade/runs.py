@@ -554,7 +554,8 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
     if result.shape is not None and result.status != "diverged":
         from .sharp import compare
 
-        result.shape["sharp_reference"] = compare(be.scene.params, result.shape, result.final)
+        result.shape["sharp_reference"] = compare(be.scene.params, result.shape, result.final,
+                                                  points=np.shape(grid[0])[0])
     result.final_grid = grid[0]
     if out is not None:
         with critical():  # a signal now waits for the run's last files

@@ -30,11 +30,21 @@ def _solve(branch: str, v: float, m0: float, kbar: float, c: float):
     return solve(branch, v, m0=m0, kbar=kbar, c=c, tol=1e-7, levels=LEVELS[:2])
 
 
-def compare(params: Params, shape: dict | None, final: dict) -> dict | None:
+#: fewer grid points per ε than this and the run's energy is not worth a comparison (its
+#: interface is not resolved; the test suite's small runs are such)
+MIN_POINTS_PER_EPS = 1.0
+
+
+def compare(params: Params, shape: dict | None, final: dict,
+            points: int | None = None) -> dict | None:
     """The sharp reference of the run's final shape (None where there is none to compare
-    with): ``branch``, ``v``, ``e_sharp``, ``e_run``, ``rel_diff``, ``eps`` and ``line``; or
-    ``branch``, ``v`` and ``missing`` (why there is no sharp shape there)."""
+    with, or where the run does not resolve its interface: fewer than
+    ``MIN_POINTS_PER_EPS`` of its ``points`` per axis per ε): ``branch``, ``v``,
+    ``e_sharp``, ``e_run``, ``rel_diff``, ``eps`` and ``line``; or ``branch``, ``v`` and
+    ``missing`` (why there is no sharp shape there)."""
     if not shape or shape.get("components") != 1:
+        return None
+    if points is not None and points * params.eps / params.L < MIN_POINTS_PER_EPS:
         return None
     branch = BRANCH_OF_LABEL.get(shape.get("label", ""))
     sharp = shape.get("sharp") or {}

@@ -28,6 +28,7 @@ STEPS = (
     ("constraints_study", ["studies/constraints_study.py", "--out", RESULTS]),
     ("gallery", ["studies/gallery.py", "--out", f"{RESULTS}/gallery", "--max-steps", "5000"]),
     ("readme_figure", ["studies/readme_figure.py", "--out", f"{RESULTS}/readme"]),
+    ("sharp_limit", ["studies/sharp_limit.py", "--out", RESULTS]),
 )
 
 

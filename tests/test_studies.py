@@ -206,6 +206,19 @@ def check_regenerate(result, out):
     assert all("--out studies/results" in line for line in result.values()), result
 
 
+def check_sharp_limit(result, out):
+    """The sharp prolate and oblate at v = 0.8 as the reference gives them (to 1e-8); the
+    seeded phase-field prolate's energy above the sharp one and falling as ε falls."""
+    w = {r["branch"]: r["w"] for r in result["branches"]}
+    assert abs(w["prolate"] - 1.387440432444) < 1e-8 and abs(w["oblate"] - 1.452538628565) < 1e-8
+    (row,) = result["rows"]
+    e = row["e_phase_field"]
+    assert row["branch"] == "prolate" and len(e) == 3 and row["eps"] == [0.08, 0.064, 0.05]
+    assert all(a > b > row["e_sharp"] for a, b in zip(e, e[1:], strict=False)), e
+    assert e[-1] < 1.5 * row["e_sharp"], e
+    assert (out / "sharp_limit.md").is_file() and (out / "sharp-eps.png").is_file()
+
+
 ARGS = {"readme_figure": ["--steps", "2", "--n", "6"]}
 #: where each study writes by default (under the current directory)
 DEFAULT_OUT = {"gallery": "runs/gallery", "readme_figure": "runs/readme"}

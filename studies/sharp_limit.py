@@ -1,0 +1,592 @@
+"""How close to the sharp membrane: the axisymmetric sharp reference (``sharp_ref``) along its
+branches, and where its lowest-energy branch changes.
+
+Stage ``branches`` (the minimal model: bending only, fixed area and volume): the prolate,
+oblate and stomatocyte branches and the axisymmetric torus at v = 0.50, 0.55, …, 0.95 (where
+each exists), the sphere and the Willmore torus; the lowest-energy branch of genus 0 at each
+v and the reduced volumes where it changes, each found as the root of the energy difference
+of the two branches (a quadratic through three solves 0.01 apart around the sign change).
+Classic values to compare with (Seifert, Berndl & Lipowsky, Phys. Rev. A 44, 1182 (1991)):
+prolate ↔ oblate at v ≈ 0.652, oblate ↔ stomatocyte at v ≈ 0.592.
+
+Stage ``eps`` (the limit ε → 0): for the sphere, the Clifford torus, and the prolate, oblate
+and stomatocyte branches at v ∈ {0.95, 0.8, 0.65, 0.6, 0.55} where the branch exists, a
+phase-field steady state seeded from the sharp meridian (initial condition ``meridian``: the
+tanh profile of the signed distance to it), the minimal model (bending, volume, area; no
+ADE), exact constraints with the localized volume (α and β those of the sharp shape of R₀
+chosen to fit the box with a margin of ≥ 4.75 ε at the largest ε), the ``steady`` recipe
+(stabilized scheme at 100× Δt = 0.75 ε³, momentum, until the relative change of E per step
+is below 1e-9), at ε ∈ {0.04, 0.032, 0.02, 0.016} (and 0.0128, 0.01 for the cases that keep
+their branch at 0.016, ``--fine``) with n = 1.28/ε points per axis (nodes per ε held fixed:
+ε/h = 1.28), on the spectral backend, and for six cases that keep their branch on the FEM
+too (order 4 on the same nodes, ε ≥ 0.016). e = W / (16√2π/3), the bending energy over that
+of a sharp sphere in the model's units. The observed order p from the three smallest ε, then
+Richardson over the two smallest: e₀ = e(ε₂) − (e(ε₁) − e(ε₂)) / ((ε₁/ε₂)^p − 1). A run
+keeps its branch if its surface is one body of genus 0 (1 for the torus) with the branch's
+label (prolate/cylinder/gourd/chain, oblate/discocyte; any genus-0 label for the sphere and
+the stomatocyte) and reduced area difference within 0.12 of the sharp one (see ``LABELS``).
+With two such ε only, p = 2 is assumed (marked).
+
+Results: ``OUT/sharp_limit.md`` (tables), ``OUT/sharp_limit.json`` (``rows``: one per
+(backend, branch, v) with e_sharp, e_extrapolated, rel_diff, eps, e_phase_field,
+kept_branch; ``branches``, ``transitions``: the sharp stage), ``OUT/sharp-branches.png`` (w
+along each branch; meridians), ``OUT/sharp-eps.png`` (e against ε², extrapolations) and
+``OUT/sharp-sections.png`` (the phase field's φ = 0 at the smallest ε over the sharp
+meridian). Every solve and run is cached in ``OUT/sharp/solves.json`` and
+``OUT/sharp/runs.json`` (resumable: nothing cached is redone).
+
+    python studies/sharp_limit.py --out studies/results     # everything (~2 h on 2 cores)
+    python studies/sharp_limit.py --out studies/results --stages eps --backends fem
+    python studies/sharp_limit.py --out studies/results --report-only   # from the caches
+    python studies/sharp_limit.py --quick          # a look in seconds (under runs/studies)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from sharp_ref.branches import solve
+from sharp_ref.membrane import BranchError
+
+DEFAULT_OUT = Path("runs/studies")  # the committed results: --out studies/results
+GRID = tuple(round(0.50 + 0.05 * i, 2) for i in range(10))  # 0.50 … 0.95
+BRANCHES = ("prolate", "oblate", "stomatocyte")  # genus 0: the classic diagram's
+COLUMNS = BRANCHES + ("torus",)  # the table's: genus 1 beside them
+#: (lower branch above, lower branch below, first guess of the v where they swap)
+TRANSITIONS = (("prolate", "oblate", 0.65), ("oblate", "stomatocyte", 0.59))
+
+
+def _key(branch: str, v) -> str:
+    return f"{branch}@{'free' if v is None else f'{v:.4f}'}"
+
+
+class Cache:
+    """{key: row} in a JSON file, written after each solve (atomically: a temporary file
+    renamed over the old one)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.rows = json.loads(path.read_text()) if path.is_file() else {}
+
+    def get(self, branch: str, v, *, compute: bool = True) -> dict | None:
+        key = _key(branch, v)
+        if key not in self.rows and compute:
+            t0 = time.perf_counter()
+            try:
+                r = solve(branch, v)
+                row = {k: r.to_json()[k] for k in ("branch", "v", "w", "e", "da", "converged",
+                                                    "residual", "r", "z")}
+            except BranchError as err:
+                row = {"branch": branch, "v": v, "missing": str(err)}
+            row["seconds"] = round(time.perf_counter() - t0, 1)
+            print(f"  {key}: " + (f"w = {row['w']:.10f}" if "w" in row else row["missing"])
+                  + f"  ({row['seconds']} s)", flush=True)
+            self.rows[key] = row
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = self.path.with_suffix(".tmp")
+            tmp.write_text(json.dumps(self.rows, indent=0, sort_keys=True) + "\n")
+            os.replace(tmp, self.path)
+        return self.rows.get(key)
+
+
+def crossing(cache: Cache, upper: str, lower: str, guess: float, compute: bool = True) -> dict:
+    """The v where ``upper`` (lowest above it) and ``lower`` (lowest below) have equal w:
+    the root of a quadratic through their differences at three v, 0.01 apart, that bracket
+    it (moved along until they do)."""
+    vs = [round(guess - 0.01, 2), round(guess, 2), round(guess + 0.01, 2)]
+    for _ in range(8):
+        rows = [(cache.get(upper, v, compute=compute), cache.get(lower, v, compute=compute))
+                for v in vs]
+        if any(a is None or b is None or "w" not in a or "w" not in b for a, b in rows):
+            return {"between": [upper, lower], "v": None, "note": "a branch is missing near "
+                    f"v = {guess}"}
+        d = [a["w"] - b["w"] for a, b in rows]  # > 0 where ``lower`` is the lower one
+        if d[0] > 0 > d[-1] or d[0] < 0 < d[-1]:
+            c = np.polyfit(vs, d, 2)
+            roots = [x.real for x in np.roots(c) if abs(x.imag) < 1e-12 and vs[0] <= x.real
+                     <= vs[-1]]
+            v = float(roots[0])
+            w = float(np.polyval(np.polyfit(vs, [a["w"] for a, _ in rows], 2), v))
+            return {"between": [upper, lower], "v": v, "w": w, "samples": vs,
+                    "differences": d}
+        step = -0.01 if d[0] > 0 else 0.01  # lower already lower everywhere: move up
+        vs = [round(x + step, 2) for x in vs]
+    return {"between": [upper, lower], "v": None, "note": "no sign change found"}
+
+
+# ---------------------------------------------------------------------------------------
+# stage eps: phase-field steady states seeded from the sharp shapes, ε → 0
+# ---------------------------------------------------------------------------------------
+EPS = (0.04, 0.032, 0.02, 0.016, 0.0128, 0.01)
+NODES_PER_EPS = 1.28  # ε/h: n = 1.28/ε points per axis (32, 40, 64, 80, 100, 128)
+EPS_V = (0.95, 0.8, 0.65, 0.6, 0.55)
+#: (branch, v) of the ε stage: the sphere and the Clifford torus first
+EPS_CASES = (("sphere", 1.0), ("torus", None)) + tuple(
+    (b, v) for b in BRANCHES for v in EPS_V)
+#: the labels a run of each branch may end with (a sphere at R₀/h = 8 reads as slightly
+#: oblate or prolate; the prolate below v ≈ 0.85 has a waist, "gourd", whose long flat middle
+#: can read as two necks, "chain"); with ``DA_TOL`` on the reduced area difference, which
+#: tells a budding chain (da 0.18–0.25 above the sharp prolate's) from the prolate (≤ 0.12
+#: measured, 0.10 for the torus at ε = 0.04) and the stomatocyte (da 0.4–0.6) from the
+#: oblate (≈ 1)
+GENUS0 = ("sphere", "oblate", "discocyte", "prolate")
+LABELS = {"sphere": GENUS0, "torus": ("torus",),
+          "prolate": ("prolate", "cylinder", "gourd", "chain"),
+          "oblate": ("oblate", "discocyte"),
+          "stomatocyte": GENUS0}
+DA_TOL = 0.12
+SPHERE_W = 16.0 * math.sqrt(2.0) * math.pi / 3.0  # a sharp sphere's W in the model's units
+MARGIN = 4.75 * max(EPS)
+#: the finest two only for the cases given with --fine (the cost grows like ε⁻⁴): by default
+#: those that keep their branch at ε = 0.016; ``FINE_STOP``: where a case stops (the sphere's
+#: steady state is slow to settle: 2350 steps at ε = 0.0128)
+FINE = (0.0128, 0.01)
+FINE_CASES = ("sphere@1.0000", "torus@free", "prolate@0.9500", "prolate@0.8000", "prolate@0.6500",
+              "prolate@0.6000", "prolate@0.5500", "oblate@0.9500", "oblate@0.8000",
+              "oblate@0.5500")
+FINE_STOP = {"sphere@1.0000": 0.0128}
+
+
+#: what a run of the study covers (the full one, or ``--quick``'s): the grid of v and the
+#: branches of the sharp stage, its transitions, the ε, the cases, those also at the finest
+#: ε, and the FEM's column (order 4 on the same nodes, ε down to 0.016: the cases that keep
+#: their branch)
+Plan = SimpleNamespace
+FULL = Plan(grid=GRID, columns=COLUMNS, transitions=TRANSITIONS, eps=EPS, cases=EPS_CASES,
+            fine=FINE_CASES, fem_cases=("sphere@1.0000", "torus@free", "prolate@0.9500",
+                                        "prolate@0.8000", "oblate@0.9500", "oblate@0.8000"))
+#: a look in seconds: the prolate and oblate at v = 0.8, three coarse ε, no transitions
+QUICK = Plan(grid=(0.8,), columns=("prolate", "oblate"), transitions=(),
+             eps=(0.08, 0.064, 0.05), cases=(("prolate", 0.8),), fine=(), fem_cases=())
+
+
+def _case_key(backend: str, branch: str, v, eps: float) -> str:
+    return f"{backend}/{_key(branch, v)}/{eps:.4f}"
+
+
+def gap(sharp: dict) -> float | None:
+    """The narrowest passage of the sharp surface (units of R₀): the smallest distance
+    between two of its points that are far apart along it (straight distance below half the
+    distance along the meridian, through a pole where that is shorter: a waist, a
+    stomatocyte's neck, an oblate's thin centre); None for a shape without one."""
+    r, z = np.asarray(sharp["r"]), np.asarray(sharp["z"])
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(r), np.diff(z)))])
+    closed = r[0] > 1e-9  # a torus's tube
+    best = math.inf
+    for sign in (1.0, -1.0):  # the point itself, or its mirror across the axis
+        d = np.hypot(r[:, None] - sign * r[None, :], z[:, None] - z[None, :])
+        if sign > 0:
+            sep = np.abs(s[:, None] - s[None, :])
+            if closed:
+                sep = np.minimum(sep, s[-1] - sep)
+        else:  # through the top or the bottom pole
+            sep = np.minimum(s[:, None] + s[None, :], 2 * s[-1] - s[:, None] - s[None, :])
+            if closed:  # across the hole: the surface path goes round the tube
+                sep = np.full_like(d, np.inf)
+        narrow = d < 0.5 * sep
+        if narrow.any():
+            best = min(best, float(d[narrow].min()))
+    return None if math.isinf(best) else best
+
+
+def radius(sharp: dict) -> float:
+    """R₀ in the unit box: 0.25 or less, so that the shape keeps ``MARGIN`` from its
+    periodic images."""
+    extent = max(np.ptp(sharp["z"]), 2.0 * max(sharp["r"]))
+    return min(0.25, (1.0 - 2.0 * MARGIN) / extent)
+
+
+def phase_field(sharp: dict, branch: str, eps: float, backend: str) -> dict:
+    """One seeded steady state: its energy, shape and cost."""
+    from fem_ade.initial import Meridian
+    from fem_ade.model import Params
+    from fem_ade.runs import recipe, simulate
+    from fem_ade.scenes import Scene
+    from fem_ade.shape import classify, describe
+
+    R0, v = radius(sharp), sharp["v"]
+    ic = Meridian(centre=(0.5, 0.5, 0.5), r=tuple(sharp["r"]), z=tuple(sharp["z"]), scale=R0)
+    params = Params(eps=eps, alpha=4.0 / 3.0 * math.pi * R0**3 * v, beta=4.0 * math.pi * R0**2,
+                    effects={"bending", "volume", "area"}, volume_functional="localized")
+    n = round(NODES_PER_EPS / eps)
+    scene = Scene(name=f"sharp-{branch}", params=params, dt=0.0075 * eps**3, ic=ic,
+                  n=n).validate()
+    options = {"backend": "spectral", "n": n} if backend == "spectral" else {
+        "backend": "fem", "n": n // 4, "backend_options": {"order": 4}}
+    t0 = time.perf_counter()
+    res = simulate(scene, **recipe("steady", scene), **options, every=50, render=False)
+    seconds = time.perf_counter() - t0
+    d = describe(np.asarray(res.final_grid), 1.0)
+    label = classify(d)
+    row = {"branch": branch, "v": v, "eps": eps, "n": n, "R0": R0, "backend": backend,
+           "status": res.status, "steps": res.steps, "e": res.final["W"] / SPHERE_W,
+           "label": label, "components": d["components"], "genus": d["genus"],
+           "da": d["reduced_area_difference"], "v_surface": d["reduced_volume"],
+           "seconds": round(seconds, 1)}
+    row["kept_branch"] = kept(row, sharp)
+    grid = np.asarray(res.final_grid)
+    row["section"] = grid[:, grid.shape[1] // 2, :].astype(np.float32)  # y = ½, the picture's
+    return row
+
+
+def kept(run: dict, sharp: dict) -> bool:
+    """Whether a run ended on its sharp shape's branch (see the module docstring)."""
+    return bool(run["components"] == 1 and run["label"] in LABELS[run["branch"]]
+                and abs(run["da"] - sharp["da"]) < DA_TOL)
+
+
+def extrapolate(eps: list[float], e: list[float]) -> tuple[float, float, bool]:
+    """(e₀, p, observed): the observed order from the three smallest ε (p = 2, not observed,
+    if there are two or they do not give one in [0.5, 6]) and Richardson over the two
+    smallest."""
+    from scipy.optimize import brentq
+
+    order = np.argsort(eps)
+    x = [eps[i] for i in order]
+    y = [e[i] for i in order]
+    p, observed = 2.0, False
+    if len(x) >= 3:
+        ratio = (y[2] - y[1]) / (y[1] - y[0]) if y[1] != y[0] else math.nan
+
+        def f(q):
+            return (x[2] ** q - x[1] ** q) / (x[1] ** q - x[0] ** q) - ratio
+
+        try:
+            if math.isfinite(ratio) and f(0.5) * f(6.0) < 0:
+                p, observed = brentq(f, 0.5, 6.0), True
+        except ValueError:
+            pass
+    e0 = y[0] - (y[1] - y[0]) / ((x[1] / x[0]) ** p - 1.0)
+    return e0, p, observed
+
+
+def eps_rows(runs: dict, cache: Cache, backend: str, plan) -> list[dict]:
+    rows = []
+    for branch, v in plan.cases:
+        sharp = cache.get(branch, v, compute=False)
+        if sharp is None or "w" not in sharp:
+            continue
+        found = [runs[k] for k in (_case_key(backend, branch, v, e) for e in plan.eps)
+                 if k in runs]
+        if not found:
+            continue
+        for r in found:  # the rule of today, not of when the run was made
+            r["kept_branch"] = kept(r, sharp)
+        good = [r for r in found if r["kept_branch"]]
+        row = {"backend": backend, "branch": branch, "v": sharp["v"], "e_sharp": sharp["w"],
+               "eps": [r["eps"] for r in found], "e_phase_field": [r["e"] for r in found],
+               "kept_branch": [r["kept_branch"] for r in found],
+               "labels": [r["label"] for r in found], "R0": found[0]["R0"],
+               "e_extrapolated": None, "rel_diff": None, "order": None,
+               "gap_over_eps": None if gap(sharp) is None
+               else gap(sharp) * found[0]["R0"] / min(r["eps"] for r in found)}
+        if len(good) >= 2 and good[-1]["eps"] == min(r["eps"] for r in found):
+            e0, p, observed = extrapolate([r["eps"] for r in good], [r["e"] for r in good])
+            row.update(e_extrapolated=e0, order=p, order_observed=observed,
+                       rel_diff=e0 / sharp["w"] - 1.0)
+        rows.append(row)
+    return rows
+
+
+def report(cache: Cache, out: Path, plan=FULL) -> dict:
+    rows, table = [], []
+    for branch in plan.columns:
+        for v in plan.grid:
+            r = cache.get(branch, v, compute=False)
+            if r is not None:
+                rows.append(r)
+    extra = [cache.get("sphere", 1.0, compute=False), cache.get("torus", None, compute=False)]
+    lines = ["# How close to the sharp membrane", "",
+             "Written by `studies/sharp_limit.py` from `sharp_ref` (axisymmetric sharp "
+             "membranes, the minimal model: bending only, fixed area and volume). Energies "
+             "in units of a sphere's bending energy (w), reduced volume v and reduced area "
+             "difference da (1 for a sphere).", "",
+             "## Exact values", "",
+             "| shape | v | w | exact | misfit |", "|---|---|---|---|---|"]
+    for r, exact in zip(extra, (1.0, math.pi / 2), strict=True):
+        if r is not None and "w" in r:
+            lines.append(f"| {r['branch']} | {r['v']:.6f} | {r['w']:.12f} | {exact:.12f} | "
+                         f"{abs(r['w'] - exact):.1e} |")
+    lines += ["", "## Branches", "",
+              "The lowest of genus 0 (the classic phase diagram's) and, beside it, the torus "
+              "(axisymmetric, up-down symmetric).", "",
+              "| v | " + " | ".join(f"w {b}" for b in plan.columns) + " | lowest of genus 0 |",
+              "|---|" + "---|" * (len(plan.columns) + 1)]
+    for v in plan.grid:
+        ws = {b: cache.get(b, v, compute=False) for b in plan.columns}
+        cells = [f"{r['w']:.8f}" if r and "w" in r else "—" for r in ws.values()]
+        have = {b: r["w"] for b, r in ws.items() if r and "w" in r}
+        genus0 = {b: w for b, w in have.items() if b in BRANCHES}
+        lowest = min(genus0, key=genus0.get) if genus0 else "—"
+        lines.append(f"| {v:.2f} | " + " | ".join(cells) + f" | {lowest} |")
+        table.append({"v": v, "lowest_genus0": lowest,
+                      **{b: have.get(b) for b in plan.columns}})
+    lines += ["", "![w along the branches; meridians](sharp-branches.png)", "",
+              "— : the branch is not found there; why:", ""]
+    for r in rows:
+        if "missing" in r:
+            lines.append(f"- {r['branch']} at v = {r['v']:.2f}: {r['missing']}")
+    crossings = [crossing(cache, *t, compute=False) for t in plan.transitions]
+    lines += ["", "## Where the lowest branch changes", "",
+              "| from (above) | to (below) | v | w there | literature |", "|---|---|---|---|---|"]
+    for c, lit in zip(crossings, ("0.652", "0.592")[:len(crossings)], strict=True):
+        v = "—" if c["v"] is None else f"{c['v']:.4f}"
+        w = f"{c['w']:.6f}" if c.get("w") else c.get("note", "")
+        lines.append(f"| {c['between'][0]} | {c['between'][1]} | {v} | {w} | {lit} |")
+    lines += ["", "Literature: Seifert, Berndl & Lipowsky, Phys. Rev. A 44, 1182 (1991).", ""]
+    runs_path = out / "sharp" / "runs.json"
+    runs = json.loads(runs_path.read_text()) if runs_path.is_file() else {}
+    eps_table = []
+    for backend in ("spectral", "fem"):
+        rows_b = eps_rows(runs, cache, backend, plan)
+        if not rows_b:
+            continue
+        eps_table += rows_b
+        name = "spectral" if backend == "spectral" else "FEM, order 4 on the same nodes"
+        lines += ["", f"## The limit ε → 0 ({name})", "",
+                  f"e = W / W_sphere,sharp at ε = {', '.join(str(e) for e in plan.eps)} (n = "
+                  f"{', '.join(str(round(NODES_PER_EPS / e)) for e in plan.eps)}); † the run left "
+                  "the branch (its label); p the observed order; e₀ the extrapolation; gap/ε "
+                  "the sharp surface's narrowest passage (a waist, a neck, a thin centre, a "
+                  "torus's hole) over the smallest ε run.", "",
+                  "| branch | v | R₀ | gap/ε | " + " | ".join(f"ε = {e}" for e in plan.eps)
+                  + " | p | e₀ | sharp | e₀/sharp − 1 |",
+                  "|---|---|---|---|" + "---|" * len(plan.eps) + "---|---|---|---|"]
+        for r in rows_b:
+            cells = []
+            for e in plan.eps:
+                if e in r["eps"]:
+                    i = r["eps"].index(e)
+                    cells.append(f"{r['e_phase_field'][i]:.5f}" + (
+                        "" if r["kept_branch"][i] else f" † {r['labels'][i]}"))
+                else:
+                    cells.append("")
+            ex = r["e_extrapolated"]
+            g = "—" if r["gap_over_eps"] is None else f"{r['gap_over_eps']:.1f}"
+            lines.append(f"| {r['branch']} | {r['v']:.4f} | {r['R0']:.3f} | {g} | "
+                         + " | ".join(cells)
+                         + (f" | {r['order']:.2f}{'' if r['order_observed'] else ' (assumed)'} | "
+                            f"{ex:.5f} | {r['e_sharp']:.5f} | "
+                            f"{r['rel_diff']:+.2%} |" if ex is not None else
+                            f" | | | {r['e_sharp']:.5f} | — |"))
+        lines.append("")
+        for eps in plan.eps:
+            costs = [x for k, x in runs.items() if k.startswith(backend + "/")
+                     and x["eps"] == eps]
+            if costs:
+                lines += [f"- ε = {eps} (n = {costs[0]['n']}): a run took "
+                          f"{min(c['seconds'] for c in costs):.0f}–"
+                          f"{max(c['seconds'] for c in costs):.0f} s, "
+                          f"{min(c['steps'] for c in costs)}–{max(c['steps'] for c in costs)} "
+                          "steps (wall, this 2-core machine)"]
+    if eps_table:
+        lines += ["", "![e over e_sharp against ε²](sharp-eps.png)", "",
+                  "![the phase field's φ = 0 over the sharp meridian](sharp-sections.png)", ""]
+    notes = out / "sharp" / "notes.md"
+    if notes.is_file():
+        lines += [notes.read_text().strip(), ""]
+    (out / "sharp_limit.md").write_text("\n".join(lines))
+    payload = {"rows": eps_table,
+               "branches": [{k: r[k] for k in r if k not in ("r", "z")} for r in rows],
+               "exact": [{k: r[k] for k in r if k not in ("r", "z")} for r in extra if r],
+               "lowest": table, "transitions": crossings}
+    (out / "sharp_limit.json").write_text(json.dumps(payload, indent=1) + "\n")
+    figure(cache, out / "sharp-branches.png", crossings, plan)
+    if eps_table:
+        eps_figures(eps_table, runs, cache, out)
+    return payload
+
+
+def figure(cache: Cache, path: Path, crossings, plan) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.4))
+    colours = {"prolate": "tab:blue", "oblate": "tab:orange", "stomatocyte": "tab:green",
+               "torus": "tab:purple"}
+    for b in plan.columns:
+        pts = sorted((r["v"], r["w"]) for r in cache.rows.values()
+                     if r["branch"] == b and "w" in r)
+        if pts:
+            ax.plot(*zip(*pts, strict=True), "o-", ms=3, color=colours[b], label=b)
+    for c in crossings:
+        if c["v"] is not None:
+            ax.axvline(c["v"], color="0.6", lw=0.8, ls="--")
+            ax.annotate(f"{c['v']:.3f}", (c["v"], ax.get_ylim()[1]), fontsize=8,
+                        ha="center", va="bottom")
+    ax.set(xlabel="reduced volume v", ylabel="w = bending / sphere's",
+           title="minimal model: the axisymmetric branches")
+    ax.legend()
+    for k, (b, v) in enumerate((("prolate", 0.8), ("oblate", 0.65), ("stomatocyte", 0.55))):
+        r = cache.get(b, v, compute=False)
+        if r and "r" in r:
+            r_, z_ = np.array(r["r"]), np.array(r["z"])
+            off = 3.0 * k
+            bx.plot(off + r_, z_, color=colours[b])
+            bx.plot(off - r_, z_, color=colours[b])
+            bx.text(off, -1.9, f"{b}\nv = {v}", ha="center", va="top", fontsize=8)
+    bx.set_aspect("equal")
+    bx.set_ylim(-2.6, 2.0)
+    bx.set_axis_off()
+    bx.set_title("meridians (R₀ = 1)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def eps_figures(table: list[dict], runs: dict, cache: Cache, out: Path) -> None:
+    import matplotlib
+    import matplotlib.ticker
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cases = [r for r in table if r["backend"] == "spectral"] or table
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+    for ax, branches in zip(axes, (("sphere", "torus", "prolate"), ("oblate",),
+                                   ("stomatocyte",)), strict=True):
+        for k, r in enumerate(c for c in cases if c["branch"] in branches):
+            colour = f"C{k}"
+            x2 = np.array(r["eps"]) ** 2
+            y = np.array(r["e_phase_field"]) / r["e_sharp"]
+            kept = np.array(r["kept_branch"])
+            ax.plot(x2[kept], y[kept], "o-", color=colour, ms=4,
+                    label=f"{r['branch']} v = {r['v']:.2f}")
+            ax.plot(x2[~kept], y[~kept], "x", color=colour, ms=7)
+            if r["e_extrapolated"] is not None:
+                ax.plot([0.0], [r["e_extrapolated"] / r["e_sharp"]], "*", color=colour, ms=9)
+        ax.axhline(1.0, color="0.4", lw=0.8)
+        top = max(e ** 2 for r in cases for e in r["eps"])
+        ax.set(xlabel="ε²", ylabel="e / e_sharp", xlim=(-0.03 * top, 1.03 * top))
+        ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4))
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+    axes[0].set_title("phase field over sharp (★ extrapolated, × left the branch)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out / "sharp-eps.png", dpi=100)
+    plt.close(fig)
+
+    finest = {}  # per case, the run of the smallest ε whose section is kept
+    for k, x in runs.items():
+        path = out / "sharp" / "sections" / (k.replace("/", "_") + ".npy")
+        case = (x["branch"], round(x["v"], 4))
+        if (k.startswith(cases[0]["backend"] + "/") and path.is_file()
+                and (case not in finest or x["eps"] < finest[case]["eps"])):
+            finest[case] = {**x, "section": np.load(path)}
+    finest = list(finest.values())
+    if not finest:
+        return
+    cols = 6
+    rows_n = math.ceil(len(finest) / cols)
+    fig, axes = plt.subplots(rows_n, cols, figsize=(2.4 * cols, 2.5 * rows_n))
+    for ax in np.ravel(axes):
+        ax.set_axis_off()
+    for ax, x in zip(np.ravel(axes), finest, strict=False):
+        sec = np.array(x["section"])
+        m = sec.shape[0]
+        g = np.arange(m) / m
+        ax.contour(g, g, sec.T, levels=[0.0], colors="k", linewidths=1.2)
+        sharp = cache.get(x["branch"], None if x["branch"] == "torus" else x["v"],
+                          compute=False)
+        if x["branch"] == "torus":
+            sharp = cache.get("torus", None, compute=False)
+        if sharp and "r" in sharp:
+            r_, z_ = np.array(sharp["r"]) * x["R0"], np.array(sharp["z"]) * x["R0"]
+            for sgn in (1, -1):
+                ax.plot(0.5 + sgn * r_, 0.5 + z_, color="tab:red", lw=0.8, ls="--")
+        ax.set_aspect("equal")
+        ax.set_title(f"{x['branch']} v = {x['v']:.2f}, ε = {x['eps']}"
+                     f"{'' if x['kept_branch'] else ' †'}", fontsize=8)
+    fig.suptitle("φ = 0 at the smallest ε run (black) over the sharp meridian (red, dashed); "
+                 "section y = ½; † left the branch", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out / "sharp-sections.png", dpi=90)
+    plt.close(fig)
+
+
+def run_eps(cache: Cache, out: Path, backend: str, plan, only=None, fine=()) -> None:
+    path = out / "sharp" / "runs.json"
+    runs = json.loads(path.read_text()) if path.is_file() else {}
+    for branch, v in plan.cases:
+        if only and branch not in only and _key(branch, v) not in only:
+            continue
+        sharp = cache.get(branch, v)
+        if "w" not in sharp:
+            continue
+        for eps in plan.eps:
+            key = _case_key(backend, branch, v, eps)
+            if key in runs or (eps in FINE and _key(branch, v) not in fine) or (
+                    eps < FINE_STOP.get(_key(branch, v), 0.0)):
+                continue
+            row = phase_field(sharp, branch, eps, backend)
+            print(f"  {key}: e = {row['e']:.6f} (sharp {sharp['w']:.6f}), {row['label']}"
+                  f"{'' if row['kept_branch'] else ' LEFT the branch'}, {row['steps']} steps, "
+                  f"{row['seconds']} s", flush=True)
+            section = row.pop("section")
+            runs[key] = row
+            sections = out / "sharp" / "sections"
+            sections.mkdir(parents=True, exist_ok=True)
+            np.save(sections / (key.replace("/", "_") + ".npy"), section)
+            tmp = path.with_suffix(".tmp")
+            tmp.write_text(json.dumps(runs) + "\n")
+            os.replace(tmp, path)
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                    help="results folder (default runs/studies; the committed: studies/results)")
+    ap.add_argument("--report-only", action="store_true")
+    ap.add_argument("--quick", action="store_true",
+                    help="prolate and oblate at v = 0.8, ε = 0.08 … 0.05 (seconds)")
+    ap.add_argument("--stages", nargs="+", choices=("branches", "eps"),
+                    default=["branches", "eps"])
+    ap.add_argument("--backends", nargs="+", choices=("spectral", "fem"),
+                    default=["spectral", "fem"],
+                    help="the FEM runs the plan's fem_cases only, without the finest ε")
+    ap.add_argument("--cases", nargs="+", default=None, metavar="BRANCH[@V]",
+                    help="only these branches or cases, e.g. torus prolate@0.8000 (stage eps)")
+    ap.add_argument("--fine", nargs="*", default=None, metavar="BRANCH@V",
+                    help="the cases run at ε = 0.0128 and 0.01 too (default: those that keep "
+                    "their branch at 0.016)")
+    args = ap.parse_args(argv)
+    plan = QUICK if args.quick else FULL
+    fine = set(plan.fine if args.fine is None else args.fine)
+    cache = Cache(args.out / "sharp" / "solves.json")
+    if not args.report_only and "branches" in args.stages:
+        if not args.quick:
+            cache.get("sphere", 1.0)
+            cache.get("torus", None)
+        for v in plan.grid:
+            for b in plan.columns:
+                if b == "stomatocyte" and v > 0.70:
+                    continue  # left by the continuation (see the report's notes)
+                cache.get(b, v)
+        for t in plan.transitions:
+            crossing(cache, *t)
+    if not args.report_only and "eps" in args.stages:
+        for backend in args.backends:
+            if backend == "spectral":
+                run_eps(cache, args.out, backend, plan, args.cases, fine)
+            else:
+                only = set(plan.fem_cases) & set(args.cases or plan.fem_cases)
+                if only:
+                    run_eps(cache, args.out, backend, plan, only, ())
+    payload = report(cache, args.out, plan)
+    print(f"wrote {args.out / 'sharp_limit.md'}")
+    return payload
+
+
+if __name__ == "__main__":
+    main()
