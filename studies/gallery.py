@@ -405,6 +405,21 @@ def _thumb(root: Path, variant: str, backend: str, name: str) -> Path:
     return root / THUMBS / f"{variant}-{backend}-{name}.png"
 
 
+#: what the archive keeps of each shape recorded along a run: what the verdicts read (a
+#: transient is a label that comes and goes); the run folder's analysis.json has them all
+SHAPE_RECORD = ("step", "t", "label")
+
+
+def _compact(a: dict) -> dict:
+    """An analysis as the archive keeps it (its kick's too)."""
+    out = dict(a)
+    if "shapes" in out:
+        out["shapes"] = [{k: r[k] for k in SHAPE_RECORD if k in r} for r in out["shapes"]]
+    if isinstance(out.get("kick"), dict):
+        out["kick"] = _compact(out["kick"])
+    return out
+
+
 def archive(root: Path) -> dict:
     """Bring ``ARCHIVE`` and the thumbnails up to date with the analysed run folders under
     ``root`` (kept entries of runs whose folders are gone stay); returns the archive."""
@@ -413,8 +428,9 @@ def archive(root: Path) -> dict:
     from fem_ade.scenes import PAPER_SCENES
 
     path = root / ARCHIVE
-    entries = json.loads(path.read_text()) if path.is_file() else {}
-    changed = False
+    old = json.loads(path.read_text()) if path.is_file() else {}
+    entries = {k: _compact(a) for k, a in old.items()}
+    changed = entries != old
     backends = sorted({p.name for p in (root / "runs").glob("*/*") if p.is_dir()})
     for v in VARIANTS:
         for b in backends:
@@ -426,6 +442,7 @@ def archive(root: Path) -> dict:
                 kick = folder / "kick" / "analysis.json"
                 if kick.is_file():
                     a["kick"] = json.loads(kick.read_text())
+                a = _compact(a)
                 if entries.get(_key(v, b, n)) != a:
                     entries[_key(v, b, n)] = a
                     changed = True

@@ -84,6 +84,7 @@ class Cache:
                 r = solve(branch, v)
                 row = {k: r.to_json()[k] for k in ("branch", "v", "w", "e", "da", "converged",
                                                     "residual", "r", "z")}
+                row["r"], row["z"] = ([round(x, 7) for x in row[k]] for k in ("r", "z"))
             except BranchError as err:
                 row = {"branch": branch, "v": v, "missing": str(err)}
             row["seconds"] = round(time.perf_counter() - t0, 1)
