@@ -49,9 +49,8 @@ def _family(branch: str, modes: int, nodes: int):
 
 def _resize(x: np.ndarray, old, new) -> np.ndarray:
     """The unknowns of ``old`` on ``new`` (more modes: the new ones zero)."""
-    tail = 2 if old.topology == "torus" else 1
-    coef = dict(zip(old.modes.tolist(), x[:-tail], strict=True))
-    return np.concatenate([[coef.get(k, 0.0) for k in new.modes.tolist()], x[-tail:]])
+    coef = dict(zip(old.modes.tolist(), x[:-old.extra], strict=True))
+    return np.concatenate([[coef.get(k, 0.0) for k in new.modes.tolist()], x[-old.extra:]])
 
 
 def _stomatocyte_guess(family) -> np.ndarray:
@@ -73,7 +72,7 @@ def _stomatocyte_guess(family) -> np.ndarray:
 
 def _anchor(branch: str, family) -> tuple[np.ndarray, float | None]:
     """(unknowns, their reduced volume) of the branch's starting shape."""
-    x = np.zeros(len(family.modes) + (2 if branch == "torus" else 1))
+    x = np.zeros(len(family.modes) + family.extra)
     if branch == "torus":  # the Clifford torus: tube radius a, centre line R = √2 a, area 4π
         a = 1.0 / math.sqrt(math.pi * math.sqrt(2.0))
         x[-2], x[-1] = 2.0 * math.pi * a, (math.sqrt(2.0) + 1.0) * a
@@ -175,7 +174,7 @@ def solve(branch: str, v: float | None, *, m0: float = 0.0, kbar: float = 0.0,
     steps = [] if v is None or v0 is None else _path(v0, v)
     if branch == "torus" and v is not None:
         x, _, _, _ = minimise(family, Problem(None, 0.0, 0.0, c), x)
-        g = family.geometry(x[:-2], x[-2], x[-1], c)
+        g = family.at(x, c)
         steps = _path(float(np.real(g.reduced_volume)), v)
     if branch == "pear":  # from the prolate at v, kicked up-down asymmetrically
         prolate = solve("prolate", v, m0=m0, kbar=kbar, c=c, tol=1e-6, levels=levels[:1])
@@ -206,7 +205,7 @@ def solve(branch: str, v: float | None, *, m0: float = 0.0, kbar: float = 0.0,
             x, family = _resize(x, family, new), new
         say(f"{branch}: {len(family.modes)} modes, {nodes} nodes")
         x, ok, msg, res = minimise(family, problem, x)
-        g = _geometry(family, x, c)
+        g = family.at(x, c)
         result = Result(branch, problem, g, x, ok, msg, res)
         e = result.e
         if previous is not None and abs(e - previous) < tol:
@@ -215,8 +214,3 @@ def solve(branch: str, v: float | None, *, m0: float = 0.0, kbar: float = 0.0,
     _check(branch, result)
     return result
 
-
-def _geometry(family, x, c):
-    if family.topology == "torus":
-        return family.geometry(x[:-2], x[-2], x[-1], c)
-    return family.geometry(x[:-1], x[-1], c)

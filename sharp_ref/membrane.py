@@ -133,6 +133,8 @@ class Spheroidal:
     """ψ(t) = πt + Σₖ aₖ sin(kπt) on [0, 1], k ∈ ``modes``, on m + 1 Chebyshev nodes."""
 
     topology = "spheroidal"
+    #: the unknowns after the coefficients: the meridian's length S
+    extra = 1
 
     def __init__(self, modes, m: int):
         self.modes = np.asarray(modes, dtype=int)
@@ -146,6 +148,10 @@ class Spheroidal:
         # the unknowns are uₖ = k·aₖ: the bending energy's Hessian is then about uniform
         self.sin = np.sin(arg) / self.modes
         self.dcos = np.pi * np.cos(arg)
+
+    def at(self, x: np.ndarray, c: float = 0.0) -> Geometry:
+        """The geometry of the unknowns x = (coefficients, S)."""
+        return self.geometry(x[:-1], x[-1], c)
 
     def geometry(self, coef: np.ndarray, S: float, c: float = 0.0) -> Geometry:
         t = self.t
@@ -171,6 +177,8 @@ class Toroidal:
     """ψ(t) = π/2 + 2πt + Σₖ bₖ sin(2πkt) on m uniform nodes of [0, 1), r(0) = r₀."""
 
     topology = "torus"
+    #: the unknowns after the coefficients: S and r₀
+    extra = 2
 
     def __init__(self, modes, m: int):
         self.modes = np.asarray(modes, dtype=int)
@@ -181,6 +189,10 @@ class Toroidal:
         arg = 2.0 * np.pi * np.outer(self.t, self.modes)
         self.sin = np.sin(arg) / self.modes  # unknowns k·bₖ, as for Spheroidal
         self.dcos = 2.0 * np.pi * np.cos(arg)
+
+    def at(self, x: np.ndarray, c: float = 0.0) -> Geometry:
+        """The geometry of the unknowns x = (coefficients, S, r₀)."""
+        return self.geometry(x[:-2], x[-2], x[-1], c)
 
     def geometry(self, coef: np.ndarray, S: float, r0: float, c: float = 0.0) -> Geometry:
         t = self.t
@@ -265,12 +277,9 @@ class _Objective:
 
     def __init__(self, family, problem: Problem):
         self.family, self.problem = family, problem
-        self.torus = family.topology == "torus"
 
     def geometry(self, x) -> Geometry:
-        if self.torus:
-            return self.family.geometry(x[:-2], x[-2], x[-1], self.problem.c)
-        return self.family.geometry(x[:-1], x[-1], self.problem.c)
+        return self.family.at(x, self.problem.c)
 
     def energy(self, x) -> float:
         return self.problem.energy(self.geometry(x))
