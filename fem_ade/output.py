@@ -212,10 +212,10 @@ def _jsonable(obj):
     return obj
 
 
-def write_json_atomic(path: str | Path, data: dict) -> None:
+def write_json_atomic(path: str | Path, data: dict, indent: int | None = 2) -> None:
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(_jsonable(data), indent=2) + "\n")
+    tmp.write_text(json.dumps(_jsonable(data), indent=indent) + "\n")
     os.replace(tmp, path)
 
 

@@ -46,13 +46,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import time
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 
+from fem_ade.output import write_json_atomic
+from fem_ade.sharp import SPHERE_W  # a sharp sphere's W in the model's units, per κ
 from sharp_ref.branches import solve
 from sharp_ref.membrane import BranchError
 
@@ -81,10 +82,10 @@ class Cache:
         if key not in self.rows and compute:
             t0 = time.perf_counter()
             try:
-                r = solve(branch, v)
-                row = {k: r.to_json()[k] for k in ("branch", "v", "w", "e", "da", "converged",
-                                                    "residual", "r", "z")}
-                row["r"], row["z"] = ([round(x, 7) for x in row[k]] for k in ("r", "z"))
+                solved = solve(branch, v).to_json()
+                row = {k: solved[k] for k in ("branch", "v", "w", "e", "da", "converged",
+                                              "residual")}
+                row["r"], row["z"] = ([round(x, 7) for x in solved[k]] for k in ("r", "z"))
             except BranchError as err:
                 row = {"branch": branch, "v": v, "missing": str(err)}
             row["seconds"] = round(time.perf_counter() - t0, 1)
@@ -92,9 +93,7 @@ class Cache:
                   + f"  ({row['seconds']} s)", flush=True)
             self.rows[key] = row
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = self.path.with_suffix(".tmp")
-            tmp.write_text(json.dumps(self.rows, indent=0, sort_keys=True) + "\n")
-            os.replace(tmp, self.path)
+            write_json_atomic(self.path, dict(sorted(self.rows.items())), indent=0)
         return self.rows.get(key)
 
 
@@ -144,7 +143,6 @@ LABELS = {"sphere": GENUS0, "torus": ("torus",),
           "oblate": ("oblate", "discocyte"),
           "stomatocyte": GENUS0}
 DA_TOL = 0.12
-SPHERE_W = 16.0 * math.sqrt(2.0) * math.pi / 3.0  # a sharp sphere's W in the model's units
 MARGIN = 4.75 * max(EPS)
 #: the finest two only for the cases given with --fine (the cost grows like ε⁻⁴): by default
 #: those that keep their branch at ε = 0.016; ``FINE_STOP``: where a case stops (the sphere's
@@ -211,7 +209,6 @@ def phase_field(sharp: dict, branch: str, eps: float, backend: str) -> dict:
     from fem_ade.model import Params
     from fem_ade.runs import recipe, simulate
     from fem_ade.scenes import Scene
-    from fem_ade.shape import classify, describe
 
     R0, v = radius(sharp), sharp["v"]
     ic = Meridian(centre=(0.5, 0.5, 0.5), r=tuple(sharp["r"]), z=tuple(sharp["z"]), scale=R0)
@@ -225,11 +222,10 @@ def phase_field(sharp: dict, branch: str, eps: float, backend: str) -> dict:
     t0 = time.perf_counter()
     res = simulate(scene, **recipe("steady", scene), **options, every=50, render=False)
     seconds = time.perf_counter() - t0
-    d = describe(np.asarray(res.final_grid), 1.0)
-    label = classify(d)
+    d = res.shape  # the run's own descriptors of its final φ = 0 surface (sharp values)
     row = {"branch": branch, "v": v, "eps": eps, "n": n, "R0": R0, "backend": backend,
            "status": res.status, "steps": res.steps, "e": res.final["W"] / SPHERE_W,
-           "label": label, "components": d["components"], "genus": d["genus"],
+           "label": d["label"], "components": d["components"], "genus": d["genus"],
            "da": d["reduced_area_difference"], "v_surface": d["reduced_volume"],
            "seconds": round(seconds, 1)}
     row["kept_branch"] = kept(row, sharp)
@@ -282,13 +278,14 @@ def eps_rows(runs: dict, cache: Cache, backend: str, plan) -> list[dict]:
         for r in found:  # the rule of today, not of when the run was made
             r["kept_branch"] = kept(r, sharp)
         good = [r for r in found if r["kept_branch"]]
+        narrowest = gap(sharp)
         row = {"backend": backend, "branch": branch, "v": sharp["v"], "e_sharp": sharp["w"],
                "eps": [r["eps"] for r in found], "e_phase_field": [r["e"] for r in found],
                "kept_branch": [r["kept_branch"] for r in found],
                "labels": [r["label"] for r in found], "R0": found[0]["R0"],
                "e_extrapolated": None, "rel_diff": None, "order": None,
-               "gap_over_eps": None if gap(sharp) is None
-               else gap(sharp) * found[0]["R0"] / min(r["eps"] for r in found)}
+               "gap_over_eps": None if narrowest is None
+               else narrowest * found[0]["R0"] / min(r["eps"] for r in found)}
         if len(good) >= 2 and good[-1]["eps"] == min(r["eps"] for r in found):
             e0, p, observed = extrapolate([r["eps"] for r in good], [r["e"] for r in good])
             row.update(e_extrapolated=e0, order=p, order_observed=observed,
@@ -500,8 +497,6 @@ def eps_figures(table: list[dict], runs: dict, cache: Cache, out: Path) -> None:
         ax.contour(g, g, sec.T, levels=[0.0], colors="k", linewidths=1.2)
         sharp = cache.get(x["branch"], None if x["branch"] == "torus" else x["v"],
                           compute=False)
-        if x["branch"] == "torus":
-            sharp = cache.get("torus", None, compute=False)
         if sharp and "r" in sharp:
             r_, z_ = np.array(sharp["r"]) * x["R0"], np.array(sharp["z"]) * x["R0"]
             for sgn in (1, -1):
@@ -539,9 +534,7 @@ def run_eps(cache: Cache, out: Path, backend: str, plan, only=None, fine=()) -> 
             sections = out / "sharp" / "sections"
             sections.mkdir(parents=True, exist_ok=True)
             np.save(sections / (key.replace("/", "_") + ".npy"), section)
-            tmp = path.with_suffix(".tmp")
-            tmp.write_text(json.dumps(runs) + "\n")
-            os.replace(tmp, path)
+            write_json_atomic(path, runs, indent=None)
 
 
 def main(argv=None) -> dict:
