@@ -54,6 +54,8 @@ import math
 import time
 from pathlib import Path
 
+from fem_ade.render import compact_png
+
 DT_FACTORS = (100, 30, 10, 3, 1)
 VARIANTS = {  # name: (penalty factor or None for exact, label)
     "M1x": (1, "penalty, paper M₁ = 1e5, M₂ = 1e4"),
@@ -92,15 +94,11 @@ def common_kwargs(name: str, variant: str, n: int, extra: dict, allow: bool) -> 
     )
 
 
-def _compress(png: Path, colours: int = 128) -> None:
-    """A picture the results keep, in a palette of ``colours`` (a third of the bytes)."""
-    if not png.is_file():
-        return
-    from PIL import Image
-
-    with Image.open(png) as im:
-        small = im.convert("RGB").quantize(colours)
-    small.save(png, optimize=True)
+def _compress(png: Path) -> None:
+    """A picture the results keep: 3/4 of the render's size in 64 colours (a fifth of the
+    bytes; the captions and the section stay legible)."""
+    if png.is_file():
+        compact_png(png, 64, scale=0.75)
 
 
 def energy_rises(history: list[dict], rel: float = 1e-12) -> int:

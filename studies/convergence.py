@@ -51,6 +51,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from fem_ade.render import save_figure  # noqa: E402
+
 OUT = Path("runs") / "studies"  # the committed results: --out studies/results
 QUANTITIES = ("E", "W", "G", "V", "A", "dA")
 
@@ -539,7 +541,7 @@ def _plot(rows, title, path) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, ncol=2)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path, colours=64)
 
 
 if __name__ == "__main__":

@@ -30,6 +30,8 @@ import math
 import time
 from pathlib import Path
 
+from fem_ade.render import save_figure
+
 OUT = Path("runs") / "studies"  # the committed results: --out studies/results
 TARGETS = (1e-2, 1e-3, 1e-4, 1e-5)
 
@@ -228,7 +230,7 @@ def _plot(runs, front, title, path) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path, colours=64)
 
 
 if __name__ == "__main__":

@@ -53,6 +53,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from fem_ade.output import write_json_atomic
+from fem_ade.render import save_figure
 from fem_ade.sharp import SPHERE_W  # a sharp sphere's W in the model's units, per κ
 from sharp_ref.branches import solve
 from sharp_ref.membrane import BranchError
@@ -438,7 +439,7 @@ def figure(cache: Cache, path: Path, crossings, plan) -> None:
     bx.set_axis_off()
     bx.set_title("meridians (R₀ = 1)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110, colours=64)
     plt.close(fig)
 
 
@@ -472,7 +473,7 @@ def eps_figures(table: list[dict], runs: dict, cache: Cache, out: Path) -> None:
             ax.legend(fontsize=7)
     axes[0].set_title("phase field over sharp (★ extrapolated, × left the branch)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "sharp-eps.png", dpi=100)
+    save_figure(fig, out / "sharp-eps.png", dpi=100, colours=64)
     plt.close(fig)
 
     finest = {}  # per case, the run of the smallest ε whose section is kept
@@ -507,7 +508,7 @@ def eps_figures(table: list[dict], runs: dict, cache: Cache, out: Path) -> None:
     fig.suptitle("φ = 0 at the smallest ε run (black) over the sharp meridian (red, dashed); "
                  "section y = ½; † left the branch", fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "sharp-sections.png", dpi=90)
+    save_figure(fig, out / "sharp-sections.png", dpi=90, colours=64)
     plt.close(fig)
 
 
