@@ -151,11 +151,15 @@ def _crosses_itself(r: np.ndarray, z: np.ndarray, closed: bool) -> bool:
 
 
 def solve(branch: str, v: float | None, *, m0: float = 0.0, kbar: float = 0.0,
-          c: float = 0.0, tol: float = 1e-10, levels=LEVELS, progress=None) -> Result:
+          c: float = 0.0, tol: float = 1e-10, levels=LEVELS, progress=None,
+          start: Result | None = None) -> Result:
     """The membrane of ``branch`` at reduced volume ``v`` (None: the torus at fixed area
     only, Willmore's problem), with area-difference elasticity ``kbar`` = κ̄/κ toward the
     reduced area difference ``m0``, and spontaneous 2H ``c`` (units of 1/R₀).
 
+    ``start``: a result of the same branch to start from instead of the branch's anchor —
+    a continuation in ``m0``, ``kbar``, ``c`` or (a small step in) ``v``; it follows a branch
+    where the anchor's path would not reach it (a pear away from the prolate it buds from).
     ``progress(text)`` (optional) is told each continuation step and refinement. Raises
     :class:`BranchError` if the branch does not exist there (or is left)."""
     if branch not in BRANCHES:
@@ -167,10 +171,11 @@ def solve(branch: str, v: float | None, *, m0: float = 0.0, kbar: float = 0.0,
     if branch == "sphere" and v is not None and v != 1.0:
         raise BranchError(f"a sphere has reduced volume 1, not {v}")
     say = progress or (lambda text: None)
+    if start is not None:
+        return _continue(branch, v, Problem(v, m0, kbar, c), start, tol, levels, say)
     modes, nodes = levels[0]
     family = _family(branch, modes, nodes)
     x, v0 = _anchor(branch, family)
-    problem = Problem(v0, m0, kbar, c)
     steps = [] if v is None or v0 is None else _path(v0, v)
     if branch == "torus" and v is not None:
         x, _, _, _ = minimise(family, Problem(None, 0.0, 0.0, c), x)
@@ -194,23 +199,44 @@ def solve(branch: str, v: float | None, *, m0: float = 0.0, kbar: float = 0.0,
         if not ok:
             raise BranchError(f"the {branch} branch is lost at v = {target:.4f} ({msg}; "
                               f"misfit {res:.1e})")
-    problem = Problem(v, m0, kbar, c)
+    return _refine(branch, Problem(v, m0, kbar, c), family, x, walk, tol, levels, say)
+
+
+def _refine(branch, problem, family, x, first, tol, levels, say) -> Result:
+    """Minimise on ``levels[first:]`` (``family`` is that level's) until the energy changes
+    by less than ``tol`` from one level to the next; the result checked to be of ``branch``."""
     previous = None
     result = None
     for level, (modes, nodes) in enumerate(levels):
-        if level < walk:
+        if level < first:
             continue
-        if level > walk:
+        if level > first:
             new = _family(branch, modes, nodes)
             x, family = _resize(x, family, new), new
         say(f"{branch}: {len(family.modes)} modes, {nodes} nodes")
         x, ok, msg, res = minimise(family, problem, x)
-        g = family.at(x, c)
-        result = Result(branch, problem, g, x, ok, msg, res)
+        g = family.at(x, problem.c)
+        result = Result(branch, problem, g, x, ok, msg, res, family)
         e = result.e
         if previous is not None and abs(e - previous) < tol:
             break
         previous = e
     _check(branch, result)
     return result
+
+
+def _continue(branch, v, problem, start: Result, tol, levels, say) -> Result:
+    """:func:`solve` from ``start`` (see there): on the level ``start`` was solved on, then
+    finer ones as needed."""
+    if start.branch != branch or start.family is None:
+        raise ValueError(f"start must be a {branch} result of solve(), got {start.branch}")
+    family = start.family
+    level = next((i for i, (modes, nodes) in enumerate(levels)
+                  if modes == len(family.modes) and nodes == family.m), None)
+    if level is None:
+        raise ValueError("start was solved on a level not in levels")
+    if v is not None and start.problem.v is not None and abs(v - start.problem.v) > DV:
+        raise ValueError(f"a continuation step in v must be at most {DV}, "
+                         f"got {abs(v - start.problem.v):.3g}")
+    return _refine(branch, problem, family, start.x.copy(), level, tol, levels, say)
 

@@ -245,6 +245,8 @@ class Result:
     converged: bool
     message: str
     residual: float  # the largest of the constraints' and the Lagrange conditions' misfit
+    #: the meridian family x belongs to (a start for a continuation: branches.solve's start)
+    family: object = field(default=None, repr=False, compare=False)
 
     @property
     def v(self) -> float:

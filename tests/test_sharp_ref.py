@@ -93,6 +93,28 @@ def test_pear_needs_area_difference_elasticity():
         solve("pear", 0.8)
 
 
+def test_continuation_in_the_relaxed_area_difference():
+    """solve(start=) continues a branch: the prolate at v = 0.85, κ̄/κ = 1.4 continued from
+    m₀ = 1.2 to 1.24 is the one solved there directly (to 1e-9); the pear, found by its
+    anchor at m₀ = 1.8, continued down to 1.76 (where its stiffness is the prolate's
+    opposite: m follows m₀, 1.2812 -> 1.2795, while the prolate's m stays at 1.08480 to
+    1e-5 over m₀ 1.2 -> 1.24, as a P2 + P4 family at this v shows too: its da spans 0.0015
+    while its w rises by 0.13); a start of another branch is refused."""
+    levels = LEVELS[:2]
+    a = solve("prolate", 0.85, m0=1.2, kbar=1.4, tol=1e-7, levels=levels)
+    b = solve("prolate", 0.85, m0=1.24, kbar=1.4, tol=1e-7, levels=levels, start=a)
+    direct = solve("prolate", 0.85, m0=1.24, kbar=1.4, tol=1e-7, levels=levels)
+    assert abs(b.e - direct.e) < 1e-9 and abs(b.da - direct.da) < 1e-9
+    assert abs(a.da - 1.0848) < 1e-4 and abs(b.da - a.da) < 1e-5
+    assert 1.39 < b.e < 1.41  # w = 1.2857 plus q (m - m0)^2 = 4.669 x 0.155^2
+    pear = solve("pear", 0.85, m0=1.8, kbar=1.4, tol=1e-7, levels=levels)
+    lower = solve("pear", 0.85, m0=1.76, kbar=1.4, tol=1e-7, levels=levels, start=pear)
+    assert 1.27 < lower.da < pear.da - 1e-3 < 1.29, (pear.da, lower.da)
+    assert lower.e < pear.e and lower.e < b.e + 2.0
+    with pytest.raises(ValueError, match="start"):
+        solve("oblate", 0.85, m0=1.2, kbar=1.4, levels=levels, start=a)
+
+
 def _cli(*args):
     return subprocess.run([sys.executable, "-m", "sharp_ref", *args, "--quiet"],
                           capture_output=True, text=True, cwd=ROOT, timeout=300)
