@@ -18,6 +18,8 @@ SCHEMES = {
 #: initial-condition variants of a catalogue scene: the two readings of the paper's printed
 #: constant c (docs/model.md §7), and "seeded", the paper's figure's shape (fem_ade.seeds)
 IC_VARIANTS = ("consistent", "printed", "seeded")
+#: the branches a vesicle of the ``vesicle`` scene family can start on (fem_ade.vesicle)
+VESICLE_BRANCHES = ("prolate", "oblate", "stomatocyte", "pear", "sphere")
 
 #: how V = α and A = β are enforced
 CONSTRAINTS = {

@@ -17,11 +17,21 @@ import os
 import sys
 from pathlib import Path
 
-from .registry import BACKENDS, CONSTRAINTS, IC_VARIANTS, RECIPES, SCHEMES, VOLUMES
+from .registry import (
+    BACKENDS,
+    CONSTRAINTS,
+    IC_VARIANTS,
+    RECIPES,
+    SCHEMES,
+    VESICLE_BRANCHES,
+    VOLUMES,
+)
 
 EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED = 2, 3, 130
 #: the options --resume takes; every other one is stored in the run folder
 RESUME_OPTIONS = {"resume", "steps", "quiet"}
+#: the vesicle scene's options (fem_ade.vesicle.Vesicle's fields) and its branches
+VESICLE_OPTIONS = ("v", "da0", "kbar", "C", "eps", "branch", "R0")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -129,6 +139,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--allow-underresolved", action="store_true",
                    help="allow h = L/n > eps (the interface is not resolved)")
+    ves = p.add_argument_group("the vesicle scene (scene vesicle: a vesicle by its physical "
+                               "parameters; the sharp shape of --branch as its seed)")
+    ves.add_argument("--v", type=float, help="reduced volume, 0 < v <= 1 (default 0.9)")
+    ves.add_argument("--da0", type=float,
+                     help="relaxed reduced area difference (1 for a sphere; ADE with --kbar)")
+    ves.add_argument("--kbar", type=float, help="ADE modulus over kappa (default 0: no ADE)")
+    ves.add_argument("--C", type=float, help="spontaneous curvature (default 0)")
+    ves.add_argument("--eps", type=float, help="interface width (default 0.04)")
+    ves.add_argument("--branch", choices=VESICLE_BRANCHES,
+                     help="the shape it starts from (default prolate)")
+    ves.add_argument("--R0", type=float,
+                     help="its size sqrt(A/4pi) in the unit box (default: the largest <= 0.25 "
+                          "that fits)")
     for spec in BACKENDS.values():  # each backend's own options, default None = not given
         if not spec.options:
             continue
@@ -154,6 +177,10 @@ def list_scenes() -> str:
     for s in TEACHING_SCENES.values():
         lines.append(f"  {s.name:16s} {s.figure:9s} eps={s.params.eps:<5g} dt={s.dt:<6g} "
                      f"n={s.n:<4d} {s.description}")
+    lines += ["scene families (made from physical parameters):",
+              f"  {'vesicle':16s} reduced volume --v, area difference --da0, --kbar, --C, "
+              "--eps, seeded on --branch from its sharp shape (sharp_ref); e.g. vesicle --v 0.8 "
+              "--branch oblate --recipe steady --constraints exact"]
     return "\n".join(lines)
 
 
@@ -297,7 +324,16 @@ def _main(argv, scratch: str | None = None) -> int:
         from .runs import recipe
         from .scenes import resolve_scene
 
-        scene = resolve_scene(args.scene)
+        chosen = {k: getattr(args, k) for k in VESICLE_OPTIONS if k in given}
+        if args.scene == "vesicle":
+            from .scenes import vesicle_scene
+
+            scene = vesicle_scene(**chosen)
+        elif chosen:
+            raise ModelError(f"--{', --'.join(chosen)} describe the vesicle scene; "
+                             f"{args.scene} is another")
+        else:
+            scene = resolve_scene(args.scene)
         for key, value in recipe(args.recipe, scene).items():
             if key in ("until_steady", "max_steps") and "steps" in given:
                 continue  # --steps N: N steps (with the recipe's numerics)

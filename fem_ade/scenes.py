@@ -249,14 +249,30 @@ TEACHING_SCENES: dict[str, Scene] = {s.name: s for s in _TEACHING}
 SCENES: dict[str, Scene] = {**PAPER_SCENES, **TEACHING_SCENES}
 
 
+#: scene families: made from physical parameters (``get_scene(NAME)`` is the defaults)
+FAMILIES = ("vesicle",)
+
+
+def vesicle_scene(**kw) -> Scene:
+    """The ``vesicle`` family (:mod:`fem_ade.vesicle`): a vesicle of reduced volume ``v``,
+    relaxed area difference ``da0``, ``kbar`` = κ̄/κ, spontaneous curvature ``C``, width
+    ``eps``, seeded on ``branch`` (prolate, oblate, stomatocyte, pear, sphere)."""
+    from .vesicle import vesicle_parts
+
+    return Scene(**vesicle_parts(**kw)).validate()
+
+
 def get_scene(name: str) -> Scene:
-    """A catalogue scene by name, or a clear :class:`ModelError` listing the valid names."""
+    """A catalogue scene by name (a family's with its defaults), or a clear
+    :class:`ModelError` listing the valid names."""
+    if name in FAMILIES:
+        return vesicle_scene()
     try:
         return SCENES[name]
     except KeyError:
         raise ModelError(
-            f"unknown scene {name!r}; valid scenes: {', '.join(SCENES)} (or a .toml file)"
-        ) from None
+            f"unknown scene {name!r}; valid scenes: {', '.join([*SCENES, *FAMILIES])} "
+            "(or a .toml file)") from None
 
 
 # ---------------------------------------------------------------------------------------
@@ -290,6 +306,10 @@ def load_scene_file(path: str | Path) -> Scene:
         [ic]                  # kind = "ellipsoid" (centre, axes, c or c_consistent/c_printed)
         kind = "ellipsoid"    # or "sphere" (centre, radius)
 
+    With ``base = "vesicle"``, a ``[vesicle]`` table gives the family's parameters (v, da0,
+    kbar, C, eps, branch, R0, L: :func:`vesicle_scene`); the other keys then change that
+    scene as they change a catalogue one.
+
     Unknown keys and ill-typed values raise :class:`ModelError`.
     """
     path = Path(path)
@@ -315,6 +335,9 @@ def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = 
         raise ModelError(f"base must be a scene name, got {base!r}")
     params_t = data.pop("params", {})
     ic_t = data.pop("ic", None)
+    vesicle_t = data.pop("vesicle", None)
+    if vesicle_t is not None and (base != "vesicle" or not isinstance(vesicle_t, dict)):
+        raise ModelError("a [vesicle] table needs base = \"vesicle\"")
     if not isinstance(params_t, dict) or (ic_t is not None and not isinstance(ic_t, dict)):
         raise ModelError("[params] and [ic] must be TOML tables")
     scene_kw = {}
@@ -341,7 +364,8 @@ def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = 
 
     if "dim" in scene_kw and scene_kw["dim"] not in (2, 3):
         raise ModelError(f"dim must be 2 or 3, got {scene_kw['dim']}")
-    base_scene = get_scene(base) if base is not None else None
+    base_scene = (vesicle_scene(**(vesicle_t or {})) if base == "vesicle" else
+                  get_scene(base) if base is not None else None)
     dim = scene_kw.get("dim", base_scene.dim if base_scene else 3)
     ic = ic_from_mapping(ic_t, dim) if ic_t is not None else None
 

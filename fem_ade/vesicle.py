@@ -1,0 +1,190 @@
+"""The ``vesicle`` scene family: a vesicle given by its physical parameters.
+
+A membrane physicist thinks of a vesicle by its reduced volume v, its relaxed reduced area
+difference Δa₀, the ADE modulus κ̄/κ, a spontaneous curvature C, and the branch of shapes it
+starts on. :func:`vesicle_scene` maps those to the model's α, β, ΔA₀ and D, in a unit box:
+
+* R₀ (the vesicle's √(A/4π) in the box) is ``R0`` or, by default, the largest up to 0.25 with
+  which the seed keeps 3ε from the box's faces (6ε from its periodic images);
+* β = 4πR₀², α = (4π/3)R₀³·v — with the **localized** volume functional, whose V is that of
+  the φ = 0 surface, so that v is the sharp reduced volume of the seed (run it with exact
+  constraints: ``--constraints exact``, as the ``steady`` recipe's sweeps do);
+* D = 2ε/3 and ΔA₀ = 8πDR₀·Δa₀ (a sphere of radius R₀ has ΔA = 8πDR₀: Δa₀ = 1); the ADE term
+  runs when κ̄/κ > 0, the spontaneous curvature term when C ≠ 0;
+* the seed: the sharp membrane of ``branch`` at (v, Δa₀, κ̄, C) from :mod:`sharp_ref` (its
+  meridian as the ``meridian`` initial condition: the tanh profile of the signed distance);
+  where that branch does not exist there, the branch's sharp shape of the minimal model at
+  v, then (prolate, oblate) a spheroid of reduced volume v, a sphere for ``sphere``;
+  ``scene.description`` says which;
+* n = 1.28 L/ε grid points per axis (ε/h = 1.28, where the sharp-limit study's energies
+  extrapolate), Δt = 0.0075 ε³ (the ``steady`` recipe runs at 100× that).
+
+From the command line: ``python -m fem_ade.run vesicle --v 0.8 --branch oblate --recipe
+steady --constraints exact``; from a TOML scene file: ``base = "vesicle"`` and a ``[vesicle]``
+table with these keys; from Python: :func:`fem_ade.scenes.vesicle_scene`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from .initial import Meridian
+from .model import ModelError, Params
+from .registry import VESICLE_BRANCHES
+
+#: the branches a vesicle can start on
+BRANCHES = VESICLE_BRANCHES
+#: ε/h of the default grid, and Δt / ε³
+NODES_PER_EPS = 1.28
+DT_PER_EPS3 = 0.0075
+
+
+@dataclass(frozen=True)
+class Vesicle:
+    """The physical parameters of a ``vesicle`` scene (see the module docstring)."""
+
+    v: float = 0.9
+    da0: float | None = None  # None: the seed's own Δa (no ADE unless kbar > 0)
+    kbar: float = 0.0
+    C: float = 0.0
+    eps: float = 0.04
+    branch: str = "prolate"
+    R0: float | None = None
+    L: float = 1.0
+
+    def check(self) -> Vesicle:
+        def real(name, value, low=None, high=None, strict=False):
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and \
+                math.isfinite(value)
+            if ok and low is not None:
+                ok = value > low if strict else value >= low
+            if ok and high is not None:
+                ok = value <= high
+            if not ok:
+                bounds = "" if low is None else (f" > {low}" if strict else f" >= {low}")
+                bounds += "" if high is None else f" and <= {high}"
+                raise ModelError(f"vesicle {name} must be a number{bounds}, got {value!r}")
+
+        real("v", self.v, 0.0, 1.0, strict=True)
+        if self.da0 is not None:
+            real("da0", self.da0, 0.0, strict=True)
+        real("kbar", self.kbar, 0.0)
+        real("C", self.C)
+        real("eps", self.eps, 0.0, self.L / 8.0, strict=True)
+        real("L", self.L, 0.0, strict=True)
+        if self.R0 is not None:
+            real("R0", self.R0, 0.0, 0.5 * self.L, strict=True)
+        if self.branch not in BRANCHES:
+            raise ModelError(f"vesicle branch must be one of {', '.join(BRANCHES)}, got "
+                             f"{self.branch!r}")
+        return self
+
+
+@lru_cache(maxsize=256)
+def sharp_shape(branch: str, v: float, m0: float, kbar: float, c: float):
+    """The sharp membrane of ``branch`` (a :class:`sharp_ref.membrane.Result`), or None
+    where it does not exist; cached (a sweep asks for the same seed many times)."""
+    from sharp_ref.branches import LEVELS, solve
+    from sharp_ref.membrane import BranchError
+
+    try:
+        return solve(branch, v, m0=m0, kbar=kbar, c=c, tol=1e-7, levels=LEVELS[:2])
+    except BranchError:
+        return None
+
+
+def spheroid_meridian(v: float, prolate: bool, points: int = 201) -> tuple[np.ndarray, ...]:
+    """(r, z) of the spheroid of reduced volume ``v`` with area 4π (R₀ = 1)."""
+    from scipy.optimize import brentq
+
+    def shape(q):  # semi-axes: a around the axis, c along it, q = c / a
+        th = np.linspace(0.0, math.pi, 4001)
+        r, z = np.sin(th), q * np.cos(th)
+        ds = np.hypot(np.gradient(r, th), np.gradient(z, th))
+        area = 2.0 * math.pi * np.trapezoid(r * ds, th)
+        volume = 4.0 * math.pi / 3.0 * q
+        return area, volume
+
+    def reduced(q):
+        area, volume = shape(q)
+        return volume / (4.0 * math.pi / 3.0 * (area / (4.0 * math.pi)) ** 1.5) - v
+
+    q = 1.0 if v >= 1.0 else (brentq(reduced, 1.0 + 1e-9, 200.0) if prolate else
+                              brentq(reduced, 1e-3, 1.0 - 1e-9))
+    area, _ = shape(q)
+    a = math.sqrt(4.0 * math.pi / area)  # scaled to area 4π
+    th = np.linspace(0.0, math.pi, points)
+    return a * np.sin(th), a * q * np.cos(th)
+
+
+def seed_meridian(ves: Vesicle, c: float) -> tuple[np.ndarray, np.ndarray, str]:
+    """(r, z, where it came from) of the seed, R₀ = 1."""
+    m0 = ves.da0 if ves.da0 is not None else 0.0
+    kbar = ves.kbar if ves.da0 is not None else 0.0
+    if ves.branch == "sphere":
+        if ves.v < 1.0:
+            R = ves.v ** (1.0 / 3.0)  # a sphere of the target volume: its area relaxes up
+            th = np.linspace(0.0, math.pi, 201)
+            return R * np.sin(th), R * np.cos(th), "a sphere of the target volume"
+    attempts = [(m0, kbar, c, "the sharp shape")] + ([(0.0, 0.0, 0.0, "the sharp shape of the "
+                                                     "minimal model")] if kbar or c else [])
+    for mm, kb, cc, what in attempts:
+        res = sharp_shape(ves.branch, round(ves.v, 6), round(mm, 6), round(kb, 6), round(cc, 6))
+        if res is not None:
+            j = res.to_json(points=201)
+            r = np.maximum(np.asarray(j["r"]), 0.0)  # the poles' round-off: r = -1e-17
+            return r, np.asarray(j["z"]), f"{what} ({ves.branch})"
+    if ves.branch in ("prolate", "oblate"):
+        r, z = spheroid_meridian(ves.v, ves.branch == "prolate")
+        return r, z, f"a {ves.branch} spheroid (no sharp {ves.branch} here)"
+    raise ModelError(f"no sharp {ves.branch} at v = {ves.v} (with these da0, kbar, C) to start "
+                     f"from; choose another branch")
+
+
+def vesicle_parts(**kw) -> dict:
+    """The fields of the ``vesicle`` scene (:func:`fem_ade.scenes.vesicle_scene` makes the
+    Scene) of :class:`Vesicle`'s parameters (``v``, ``da0``, ``kbar``, ``C``, ``eps``,
+    ``branch``, ``R0``, ``L``); ModelError (one line) for bad values."""
+    unknown = set(kw) - set(Vesicle.__dataclass_fields__)
+    if unknown:
+        raise ModelError(f"unknown vesicle parameter(s) {', '.join(sorted(unknown))}; valid: "
+                         f"{', '.join(Vesicle.__dataclass_fields__)}")
+    ves = Vesicle(**kw).check()
+    margin = 3.0 * ves.eps  # the interfaces of periodic images 6ε apart: tanh tails < 3 %
+    R0 = ves.R0 if ves.R0 is not None else 0.25 * ves.L
+    c = math.sqrt(2.0) * ves.C * R0
+    r, z, origin = seed_meridian(ves, c)
+    extent = max(float(np.ptp(z)), 2.0 * float(np.max(r)))
+    if ves.R0 is None and extent * R0 > ves.L - 2.0 * margin:
+        R0 = (ves.L - 2.0 * margin) / extent
+        if ves.C:  # c = √2·C·R₀ changed with R₀: the seed again
+            c = math.sqrt(2.0) * ves.C * R0
+            r, z, origin = seed_meridian(ves, c)
+    elif extent * R0 > ves.L - 2.0 * margin:
+        raise ModelError(f"the {ves.branch} at v = {ves.v} with R0 = {R0:g} does not fit the "
+                         f"box with 3 eps to spare (extent {extent * R0:.3g} L); "
+                         "give a smaller R0 or leave it out")
+    D = 2.0 * ves.eps / 3.0
+    effects = {"bending", "volume", "area"}
+    if ves.kbar > 0 and ves.da0 is not None:
+        effects.add("ade")
+    if ves.C:
+        effects.add("spontaneous_curvature")
+    params = Params(eps=ves.eps, L=ves.L, alpha=4.0 / 3.0 * math.pi * R0**3 * ves.v,
+                    beta=4.0 * math.pi * R0**2, kappa_bar=ves.kbar, C=ves.C,
+                    delta_A0=(ves.da0 if ves.da0 is not None else 0.0) * 8.0 * math.pi * D * R0,
+                    effects=frozenset(effects), volume_functional="localized")
+    centre = (0.5 * ves.L,) * 3
+    ic = Meridian(centre=centre, r=tuple(float(x) for x in r), z=tuple(float(x) for x in z),
+                  scale=R0)
+    n = max(16, round(NODES_PER_EPS * ves.L / ves.eps))
+    text = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
+                     for k, v in asdict(ves).items() if v is not None and k != "L")
+    ic.check(3)
+    return {"name": "vesicle", "params": params, "dt": DT_PER_EPS3 * ves.eps**3, "ic": ic,
+            "n": n, "figure": "vesicle family",
+            "description": f"vesicle: {text}; R0 = {R0:.4g}; seeded from {origin}"}
