@@ -1,0 +1,447 @@
+"""Parameter sweeps on Dask: many runs to a steady state, resumable, and their table and
+phase diagram.
+
+    python -m fem_ade.sweep SWEEP.toml [--out DIR] [--workers N | --scheduler ADDRESS]
+                            [--report-only] [--quiet]
+
+A sweep file names a base scene, the fixed and the swept parameters, the seeds of each point
+and the run's options::
+
+    name = "tiny"
+    base = "vesicle"                      # the vesicle family, a catalogue scene or a .toml
+    seeds = ["prolate", "oblate"]         # vesicle: the branches each point starts from
+    [scene]                               # fixed: the vesicle's v, da0, kbar, C, eps, R0, or
+    eps = 0.08                            #   any scene or Params field of another base
+    [axes]                                # swept: a list, or {start, stop, num}
+    v = [0.7, 0.9]
+    [run]                                 # fem_ade.runs.simulate's options; recipe expands
+    recipe = "steady"
+    backend = "spectral"
+    n = 16
+    max_steps = 20
+    constraints = "exact"
+
+Each point (one value per axis and one seed) is one run folder ``OUT/points/NAME`` (NAME from
+its parameters, e.g. ``v=0.7_seed=prolate``), run by :func:`run_point` on a Dask worker: a
+``LocalCluster`` of ``--workers`` processes (one thread each) by default, or the scheduler at
+``--scheduler ADDRESS`` (one started by ``dask scheduler`` / ``dask worker``, ``dask-mpi``
+or dask-jobqueue on Slurm/PBS; README "Phase diagrams"). Killed at any moment and started
+again, a sweep skips the finished points, resumes those with a checkpoint and never runs a
+point twice at once (the run folder's lock: a point whose folder another process holds is
+waited for). A point that fails (diverged, bad parameters) is recorded with its reason in
+``OUT/points/NAME.failed.json`` and the sweep goes on.
+
+Written: ``OUT/sweep.csv`` (one row per point, rebuilt from the run folders after each point:
+an interrupted and resumed sweep ends with the table of an uninterrupted one),
+``OUT/phase-diagram.png`` (each point coloured by its end state; the lowest-energy state per
+point ringed; where seeds end in different states, marked; with the sharp reference's lowest
+branch behind) and ``OUT/montage.png`` (the end shapes, when the runs render).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import itertools
+import json
+import os
+import signal
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .model import ModelError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+#: the run options a sweep's [run] table may set (fem_ade.runs.simulate's keywords)
+RUN_KEYS = {"recipe": str, "backend": str, "n": int, "dt": float, "steps": int,
+            "until_steady": float, "max_steps": int, "every": int, "scheme": str,
+            "constraints": str, "accelerate": bool, "perturb": float,
+            "checkpoint_every": int, "render": bool, "backend_options": dict,
+            "allow_underresolved": bool}
+#: the table's columns (the axes' names come first, after ``point``; no timings: a resumed
+#: sweep's table is the uninterrupted one's, and each run's times are in its summary.json)
+COLUMNS = ("seed", "status", "steps", "E", "W", "G", "e", "label", "components", "genus",
+           "v_surface", "da_surface", "e_sharp_seed", "sharp_end", "reason")
+FINISHED = ("completed", "steady", "max_steps", "diverged")
+
+
+@dataclass(frozen=True)
+class Point:
+    """One run of a sweep: its name, the scene's parameters, its seed and run options."""
+
+    name: str
+    base: str
+    values: dict  # the swept parameters' values
+    fixed: dict
+    seed: object
+    run: dict = field(default_factory=dict)
+
+    def scene(self):
+        from .scenes import resolve_scene, vesicle_scene
+
+        if self.base == "vesicle":
+            return vesicle_scene(**self.fixed, **self.values, branch=self.seed)
+        return resolve_scene(self.base).with_(**self.fixed, **self.values)
+
+    def options(self, scene) -> dict:
+        from .runs import recipe
+
+        run = dict(self.run)
+        kw = recipe(run.pop("recipe"), scene) if "recipe" in run else {}
+        if "steps" in run:
+            kw.pop("until_steady", None)
+            kw.pop("max_steps", None)
+        kw.update(run)
+        kw.setdefault("checkpoint_every", 50)
+        kw.setdefault("render", False)
+        if self.base != "vesicle":
+            kw["seed"] = int(self.seed)
+        return kw
+
+
+@dataclass
+class Sweep:
+    name: str
+    base: str
+    axes: dict
+    fixed: dict
+    seeds: list
+    run: dict
+
+    def points(self) -> list[Point]:
+        names = list(self.axes)
+        out = []
+        for combo in itertools.product(*(self.axes[k] for k in names)):
+            values = dict(zip(names, combo, strict=True))
+            for seed in self.seeds:
+                label = "_".join([f"{k}={_fmt(v)}" for k, v in values.items()]
+                                 + [f"seed={seed}"])
+                out.append(Point(label, self.base, values, dict(self.fixed), seed,
+                                 dict(self.run)))
+        return out
+
+
+def _fmt(value) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def load_sweep(path: str | Path) -> Sweep:
+    """A sweep from its TOML file (see the module docstring); ModelError (one line)."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ModelError(f"sweep file not found: {path}") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise ModelError(f"cannot read sweep file {path}: {err}") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ModelError(f"malformed TOML in {path}: {err}") from None
+    known = {"name", "base", "seeds", "scene", "axes", "run"}
+    unknown = set(data) - known
+    if unknown:
+        raise ModelError(f"unknown key(s) {', '.join(sorted(unknown))} in {path}; valid: "
+                         f"{', '.join(sorted(known))}")
+    base = data.get("base", "vesicle")
+    if not isinstance(base, str):
+        raise ModelError(f"base must be a scene name, got {base!r}")
+    axes = {}
+    for key, spec in data.get("axes", {}).items():
+        if isinstance(spec, dict):
+            try:
+                start, stop, num = float(spec["start"]), float(spec["stop"]), int(spec["num"])
+            except (KeyError, TypeError, ValueError):
+                raise ModelError(f"axes.{key} as a table needs start, stop and num") from None
+            if num < 1:
+                raise ModelError(f"axes.{key}.num must be >= 1")
+            axes[key] = [round(start + (stop - start) * i / max(num - 1, 1), 10)
+                         for i in range(num)]
+        elif isinstance(spec, list) and spec:
+            axes[key] = spec
+        else:
+            raise ModelError(f"axes.{key} must be a non-empty list or {{start, stop, num}}")
+    seeds = data.get("seeds", ["prolate"] if base == "vesicle" else [0])
+    if not isinstance(seeds, list) or not seeds:
+        raise ModelError("seeds must be a non-empty list")
+    run = data.get("run", {})
+    for key, value in run.items():
+        kind = RUN_KEYS.get(key)
+        if kind is None:
+            raise ModelError(f"unknown run option {key!r}; valid: {', '.join(RUN_KEYS)}")
+        if kind is float and isinstance(value, int) and not isinstance(value, bool):
+            run[key] = float(value)
+        elif not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
+            raise ModelError(f"run.{key} must be of type {kind.__name__}, got {value!r}")
+    sweep = Sweep(str(data.get("name", path.stem)), base, axes, dict(data.get("scene", {})),
+                  seeds, run)
+    sweep.points()[0].scene()  # bad scene parameters fail here, before anything runs
+    return sweep
+
+
+# ---------------------------------------------------------------------------------------
+# one point, on a worker
+# ---------------------------------------------------------------------------------------
+def run_point(point: Point, root: str) -> dict:
+    """Run (or resume, or skip) one point in ``root/points/NAME``; its table row. A folder
+    held by another process gives status ``busy`` (the driver tries again later)."""
+    from .lock import FolderBusy
+    from .runs import resume, simulate
+
+    folder = Path(root) / "points" / point.name
+    failed = folder.with_name(point.name + ".failed.json")
+    t0 = time.perf_counter()
+    if _status(folder) not in FINISHED:
+        try:
+            if (folder / "checkpoint.npz").is_file() and (folder / "run.json").is_file():
+                resume(folder, quiet=True)
+            else:
+                scene = point.scene()
+                _write_json(folder.with_name(point.name + ".seed.json"),
+                            {"point": point.name, "seed": scene.description,
+                             "e_sharp": _seed_sharp_e(point)})
+                simulate(scene, out=folder, force=folder.is_dir(), quiet=True,
+                         **point.options(scene))
+            failed.unlink(missing_ok=True)
+        except FolderBusy as err:
+            return {"point": point.name, "status": "busy", "reason": str(err)}
+        except (ModelError, ValueError, FloatingPointError) as err:
+            _write_json(failed, {"point": point.name, "reason": f"{type(err).__name__}: {err}",
+                                 "seconds": round(time.perf_counter() - t0, 2)})
+    return row(point, Path(root))
+
+
+def _status(folder: Path) -> str | None:
+    try:
+        return json.loads((folder / "summary.json").read_text())["status"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _write_json(path: Path, data) -> None:
+    from .output import write_json_atomic
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(path, data)
+
+
+def row(point: Point, root: Path) -> dict:
+    """The table row of a point, from its run folder (or its failure record)."""
+    from .sharp import SPHERE_W
+
+    folder = root / "points" / point.name
+    out = {"point": point.name, **point.values, "seed": point.seed}
+    failed = folder.with_name(point.name + ".failed.json")
+    if failed.is_file():
+        rec = json.loads(failed.read_text())
+        return {**out, "status": "failed", "reason": rec["reason"]}
+    try:
+        s = json.loads((folder / "summary.json").read_text())
+    except (OSError, ValueError):
+        return {**out, "status": "pending"}
+    try:
+        seed = json.loads(folder.with_name(point.name + ".seed.json").read_text())
+    except (OSError, ValueError):
+        seed = {}
+    f, shape = s.get("final", {}), s.get("shape") or {}
+    sharp = shape.get("sharp") or {}
+    ref = s.get("sharp_reference") or {}
+    out.update(status=s["status"], steps=s["steps"], E=f.get("E"), W=f.get("W"),
+               G=f.get("G"), e=((f.get("W") or 0.0) + (f.get("G") or 0.0)) / SPHERE_W,
+               label=shape.get("label"), components=shape.get("components"),
+               genus=" ".join(str(g) for g in shape.get("genus", [])),
+               v_surface=sharp.get("reduced_volume"),
+               da_surface=sharp.get("reduced_area_difference"),
+               e_sharp_seed=seed.get("e_sharp"), sharp_end=ref.get("e_sharp"),
+               wall_s=s.get("wall_s"), reason="" if s["status"] != "diverged" else s.get(
+                   "message", ""))
+    return out
+
+
+def _seed_sharp_e(point: Point) -> float | None:
+    """The sharp energy of the seed's branch at the point (vesicle family), if it exists
+    (the solve that seeded it, cached in this process)."""
+    if point.base != "vesicle":
+        return None
+    from .vesicle import sharp_shape
+
+    p = {**point.fixed, **point.values}
+    kbar = float(p.get("kbar", 0.0)) if p.get("da0") is not None else 0.0
+    c = 0.0  # with C the seed's c depends on R0; not tabulated
+    if p.get("C"):
+        return None
+    res = sharp_shape(point.seed, round(float(p.get("v", 0.9)), 6),
+                      round(float(p.get("da0") or 0.0), 6), round(kbar, 6), c)
+    return None if res is None else float(res.e)
+
+
+# ---------------------------------------------------------------------------------------
+# the driver
+# ---------------------------------------------------------------------------------------
+def write_table(rows: list[dict], path: Path, axes: list[str]) -> None:
+    cols = ["point", *axes, *COLUMNS]
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: _cell(r.get(k)) for k in cols})
+    os.replace(tmp, path)
+
+
+def _cell(value):
+    if isinstance(value, float):
+        return f"{value:.10g}"
+    return "" if value is None else value
+
+
+def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | None = None,
+              quiet: bool = False, retry_s: float = 2.0) -> list[dict]:
+    """Run every unfinished point on Dask; the table's rows (also written to sweep.csv)."""
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    from .lock import FolderLock
+
+    out.mkdir(parents=True, exist_ok=True)
+    lock = FolderLock(out).acquire()  # one driver per sweep folder
+    points = sweep.points()
+    axes = list(sweep.axes)
+    _write_json(out / "sweep.json", {"name": sweep.name, "base": sweep.base,
+                                     "axes": sweep.axes, "scene": sweep.fixed,
+                                     "seeds": sweep.seeds, "run": sweep.run,
+                                     "points": [p.name for p in points]})
+    rows = {p.name: row(p, out) for p in points}
+    todo = [p for p in points if rows[p.name]["status"] not in (*FINISHED, "failed")]
+    for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+              "FEM_ADE_FFT_WORKERS"):
+        os.environ.setdefault(k, "1")  # one thread per worker process
+    cluster = None
+    try:
+        if scheduler:
+            client = Client(scheduler)
+        else:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=40)
+            client = Client(cluster)
+        say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
+        say(f"sweep {sweep.name}: {len(points)} points, {len(points) - len(todo)} done, "
+            f"{len(todo)} to run on {_workers_text(client)}; dashboard {client.dashboard_link}")
+        _drive(client, todo, out, rows, axes, quiet, retry_s, as_completed)
+        client.close()
+    finally:
+        if cluster is not None:
+            cluster.close()
+        write_table([rows[p.name] for p in points], out / "sweep.csv", axes)
+        lock.release()
+    return [rows[p.name] for p in points]
+
+
+def _workers_text(client) -> str:
+    n = len(client.scheduler_info().get("workers", {}))
+    return f"{n} worker{'s' if n != 1 else ''}"
+
+
+def _drive(client, todo, out, rows, axes, quiet, retry_s, as_completed):
+    from tqdm import tqdm
+
+    by_name = {p.name: p for p in todo}
+    futures = as_completed([client.submit(run_point, p, str(out), key=f"point-{p.name}",
+                                          pure=False) for p in todo])
+    failed = 0
+    started = time.perf_counter()
+    n_workers = max(1, _n(client))
+    bar = tqdm(total=len(todo), disable=quiet, unit="point", dynamic_ncols=True)
+    try:
+        for fut in futures:
+            try:
+                r = fut.result()
+            except Exception as err:  # noqa: BLE001 - a worker lost, an unexpected error
+                name = fut.key.removeprefix("point-")
+                _write_json(out / "points" / f"{name}.failed.json",
+                            {"point": name, "reason": f"{type(err).__name__}: {err}"})
+                r = row(by_name[name], out)
+            if r["status"] == "busy":  # another process runs it: ask again later
+                time.sleep(retry_s)
+                futures.add(client.submit(run_point, by_name[r["point"]], str(out),
+                                          pure=False))
+                continue
+            rows[r["point"]] = r
+            failed += r["status"] in ("failed", "diverged")
+            bar.update(1)
+            bar.set_postfix_str(f"failed {failed}, running {min(len(todo) - bar.n, n_workers)}")
+            write_table(list(rows.values()), out / "sweep.csv", axes)
+    finally:
+        bar.close()
+    if not quiet:
+        took = time.perf_counter() - started
+        print(f"ran {len(todo)} point(s) in {took:.1f} s ({failed} failed)", flush=True)
+
+
+def _n(client) -> int:
+    try:
+        return len(client.scheduler_info().get("workers", {}))
+    except Exception:  # noqa: BLE001
+        return 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m fem_ade.sweep",
+                                 description=__doc__.splitlines()[0])
+    ap.add_argument("sweep", help="the sweep file (TOML)")
+    ap.add_argument("--out", help="the sweep folder (default runs/sweeps/NAME)")
+    where = ap.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=2,
+                       help="local Dask worker processes (default 2)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="an existing Dask scheduler (tcp://HOST:PORT)")
+    ap.add_argument("--report-only", action="store_true",
+                    help="rebuild the table and the pictures from the folders; run nothing")
+    ap.add_argument("--quiet", action="store_true")
+    args = ap.parse_args(argv)
+    from .lock import FolderBusy
+
+    def stop(signum, frame):  # a kill ends the sweep as Ctrl-C does: workers closed
+        raise KeyboardInterrupt
+
+    if argv is None:
+        signal.signal(signal.SIGTERM, stop)
+    try:
+        if args.workers < 1:
+            raise ModelError(f"--workers must be >= 1, got {args.workers}")
+        sweep = load_sweep(args.sweep)
+        out = Path(args.out or Path("runs") / "sweeps" / sweep.name)
+        if args.report_only:
+            if not (out / "sweep.json").is_file():
+                raise ModelError(f"{out} holds no sweep to report on (run it first)")
+            points = sweep.points()
+            rows = [row(p, out) for p in points]
+            write_table(rows, out / "sweep.csv", list(sweep.axes))
+        else:
+            rows = run_sweep(sweep, out, workers=args.workers, scheduler=args.scheduler,
+                             quiet=args.quiet)
+    except FolderBusy as err:
+        print(f"fem_ade.sweep: error: {err}", file=sys.stderr)
+        return 2
+    except ModelError as err:
+        print(f"fem_ade.sweep: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("fem_ade.sweep: interrupted; run the same command again to go on",
+              file=sys.stderr)
+        return 130
+    from .sweep_plot import draw
+
+    pictures = draw(rows, sweep, out)
+    done = sum(r["status"] in FINISHED for r in rows)
+    bad = sum(r["status"] == "failed" for r in rows)
+    print(f"{sweep.name}: {done} of {len(rows)} points finished, {bad} failed; "
+          f"{out / 'sweep.csv'}" + "".join(f", {p}" for p in pictures))
+    return 0 if done + bad == len(rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,131 @@
+"""The pictures of a sweep (:mod:`fem_ade.sweep`): the phase diagram and the end shapes.
+
+``phase-diagram.png``: the sweep's first axis across, its second (or the seeds) up; each run a
+marker coloured by its end state (its shape label; a seed's marker shape), beside the others
+of its point; the lowest-energy end state of each point ringed in black; a point whose seeds
+end in different states marked "×" (metastable); behind them, where the sharp reference has
+the seeds' branches, the lowest sharp branch at each point as a coloured cell.
+``montage.png``: each run's ``shape.png`` (when the runs render), one row per seed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+COLOURS = {"sphere": "#7f7f7f", "prolate": "#1f77b4", "cylinder": "#6baed6",
+           "gourd": "#9ecae1", "chain": "#c6dbef", "oblate": "#ff7f0e", "discocyte": "#fdae6b",
+           "torus": "#9467bd", "pear": "#d62728", "stomatocyte": "#2ca02c"}
+MARKERS = "osD^v<>ph"
+FINISHED = ("completed", "steady", "max_steps")
+
+
+def _colour(label: str | None) -> str:
+    if not label:
+        return "white"
+    if label.endswith("vesicles"):
+        return "#8c564b"
+    return COLOURS.get(label, "#e377c2")
+
+
+def draw(rows: list[dict], sweep, out: Path) -> list[Path]:
+    """Draw what the rows allow; the paths written."""
+    written = []
+    if rows:
+        written.append(phase_diagram(rows, sweep, out / "phase-diagram.png"))
+    montage = shape_montage(rows, sweep, out / "montage.png")
+    if montage is not None:
+        written.append(montage)
+    return written
+
+
+def phase_diagram(rows: list[dict], sweep, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    from .render import save_figure
+
+    axes = list(sweep.axes)
+    xkey = axes[0] if axes else None
+    ykey = axes[1] if len(axes) > 1 else None
+    seeds = list(sweep.seeds)
+    xs = sorted({r[xkey] for r in rows}) if xkey else [0]
+    ys = sorted({r[ykey] for r in rows}) if ykey else [0]
+    dx = (min((b - a for a, b in zip(xs, xs[1:], strict=False)), default=1.0))
+    dy = (min((b - a for a, b in zip(ys, ys[1:], strict=False)), default=1.0))
+    fig, ax = plt.subplots(figsize=(7.5, 5.2))
+    groups = {}
+    for r in rows:
+        groups.setdefault((r.get(xkey, 0), r.get(ykey, 0)), []).append(r)
+    labels_seen = set()
+    for (x, y), rs in groups.items():
+        # the sharp lowest branch of the seeds at this point, as a cell behind
+        sharp = [(r["e_sharp_seed"], r["seed"]) for r in rs
+                 if isinstance(r.get("e_sharp_seed"), float)]
+        if sharp:
+            branch = min(sharp)[1]
+            ax.add_patch(plt.Rectangle((x - dx / 2, y - dy / 2), dx, dy, alpha=0.18,
+                                       color=_colour(branch), lw=0))
+        done = [r for r in rs if r.get("status") in FINISHED and r.get("e") is not None]
+        best = min(done, key=lambda r: r["e"]) if done else None
+        ends = {r.get("label") for r in done}
+        for r in rs:
+            i = seeds.index(r["seed"]) if r["seed"] in seeds else 0
+            off = (i - (len(seeds) - 1) / 2) * dx * 0.22
+            label = r.get("label") if r.get("status") in FINISHED else None
+            labels_seen.add(label)
+            ax.plot(x + off, y, MARKERS[i % len(MARKERS)], ms=9, mfc=_colour(label),
+                    mec="black" if r is best else "0.5", mew=2.0 if r is best else 0.6)
+        if len(ends) > 1:
+            ax.plot(x, y + dy * 0.32, "x", color="black", ms=6)
+    handles = [Line2D([], [], marker="s", ls="", mfc=_colour(lab), mec="0.5", ms=8,
+                      label=lab or "failed / not run") for lab in sorted(
+                          labels_seen, key=lambda s: s or "~")]
+    handles += [Line2D([], [], marker=MARKERS[i % len(MARKERS)], ls="", mfc="white", mec="k",
+                       ms=8, label=f"seed {s}") for i, s in enumerate(seeds)]
+    handles += [Line2D([], [], marker="o", ls="", mfc="white", mec="k", mew=2, ms=8,
+                       label="lowest energy at the point"),
+                Line2D([], [], marker="x", ls="", color="k", label="seeds end differently")]
+    ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.set_xlabel(xkey or "")
+    ax.set_ylabel(ykey or "")
+    if not ykey:
+        ax.set_yticks([])
+    ax.set_xlim(xs[0] - dx * 0.7, xs[-1] + dx * 0.7)
+    ax.set_ylim(ys[0] - dy * 0.7, ys[-1] + dy * 0.7)
+    ax.set_title(f"sweep {sweep.name}: end states (cells: the sharp reference's lowest "
+                 "branch)", fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=110, colours=64)
+    plt.close(fig)
+    return path
+
+
+def shape_montage(rows: list[dict], sweep, path: Path, width: int = 240) -> Path | None:
+    from PIL import Image, ImageDraw
+
+    root = path.parent / "points"
+    cells = [(r, root / r["point"] / "shape.png") for r in rows]
+    cells = [(r, p) for r, p in cells if p.is_file()]
+    if not cells:
+        return None
+    seeds = list(sweep.seeds)
+    order = sorted({r["point"].rsplit("_seed=", 1)[0] for r, _ in cells})
+    thumbs = {}
+    for r, p in cells:
+        with Image.open(p) as im:
+            w, h = im.size
+            im = im.convert("RGB").crop((0, int(0.17 * h), w // 2, h))
+            im = im.resize((width, round(width * im.size[1] / im.size[0])))
+        ImageDraw.Draw(im).text((4, 4), f"{r['point']}\n{r.get('label')}", fill="black")
+        thumbs[(r["point"].rsplit("_seed=", 1)[0], r["seed"])] = im
+    h = max(t.size[1] for t in thumbs.values())
+    sheet = Image.new("RGB", (width * len(order), h * len(seeds)), "white")
+    for i, key in enumerate(order):
+        for j, s in enumerate(seeds):
+            if (key, s) in thumbs:
+                sheet.paste(thumbs[(key, s)], (i * width, j * h))
+    sheet.quantize(64).save(path, optimize=True)
+    return path

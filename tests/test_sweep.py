@@ -1,0 +1,149 @@
+"""Parameter sweeps on Dask (fem_ade.sweep): the file, the points, a run on a LocalCluster of
+two processes, its skip of finished points, a failed point, the table's columns, and a sweep
+killed twice that ends with the table of an uninterrupted one."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from fem_ade.model import ModelError
+from fem_ade.sweep import COLUMNS, load_sweep, main, run_sweep
+
+ROOT = Path(__file__).resolve().parents[1]
+#: spheres seeded at v < 1 need no sharp solve: the quickest vesicle points
+SWEEP = """
+name = "t"
+base = "vesicle"
+seeds = ["sphere"]
+[scene]
+eps = 0.08
+[axes]
+v = {axes}
+[run]
+recipe = "steady"
+backend = "spectral"
+n = 16
+max_steps = {steps}
+constraints = "exact"
+checkpoint_every = 5
+"""
+
+
+def _file(tmp_path, axes="[0.8, 0.9]", steps=12, name="s.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(SWEEP.format(axes=axes, steps=steps))
+    return path
+
+
+def _table(path: Path) -> list[dict]:
+    with open(path) as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_sweep_file_and_points(tmp_path):
+    """Axes as lists and as {start, stop, num}; one point per value and seed, named by its
+    parameters; bad files refused in one line."""
+    path = tmp_path / "a.toml"
+    path.write_text('base = "vesicle"\nseeds = ["prolate", "oblate"]\n[scene]\neps = 0.08\n'
+                    '[axes]\nv = {start = 0.7, stop = 0.9, num = 3}\nkbar = [0.0]\n'
+                    '[run]\nn = 16\nsteps = 2\n')
+    sweep = load_sweep(path)
+    names = [p.name for p in sweep.points()]
+    assert sweep.axes["v"] == [0.7, 0.8, 0.9] and len(names) == 6
+    assert names[0] == "v=0.7_kbar=0_seed=prolate" and names[-1] == "v=0.9_kbar=0_seed=oblate"
+    for text, match in [("[axes]\nv = []\n", "non-empty"), ("colour = 1\n", "unknown key"),
+                        ("[run]\nsolver = 1\n", "unknown run option"),
+                        ("[run]\nn = 1.5\n", "run.n must be"),
+                        ("[scene]\nv = 1.5\n", "vesicle v must be")]:
+        path.write_text(text)
+        with pytest.raises(ModelError, match=match):
+            load_sweep(path)
+
+
+def test_sweep_runs_skips_and_records_a_failure(tmp_path, capsys):
+    """On a LocalCluster of two processes: every point runs to its end, the table has its
+    columns and one row per point; a point with bad parameters is recorded as failed with
+    its reason and does not stop the rest; run again, nothing runs twice."""
+    sweep = load_sweep(_file(tmp_path, axes="[0.8, 0.9, 1.2]"))
+    out = tmp_path / "out"
+    rows = run_sweep(sweep, out, workers=2, quiet=True)
+    table = _table(out / "sweep.csv")
+    assert list(table[0]) == ["point", "v", *COLUMNS]
+    assert [r["point"] for r in table] == ["v=0.8_seed=sphere", "v=0.9_seed=sphere",
+                                           "v=1.2_seed=sphere"]
+    good, bad = table[:2], table[2]
+    for r in good:
+        assert r["status"] == "max_steps" and r["steps"] == "12" and r["components"] == "1"
+        assert float(r["E"]) > 0 and r["label"]
+    assert bad["status"] == "failed" and "vesicle v must be" in bad["reason"]
+    assert rows[2]["status"] == "failed"
+    stamps = {p: (out / "points" / p / "summary.json").stat().st_mtime_ns
+              for p in ("v=0.8_seed=sphere", "v=0.9_seed=sphere")}
+    again = run_sweep(sweep, out, workers=2, quiet=True)
+    assert [r["status"] for r in again] == [r["status"] for r in rows]
+    assert stamps == {p: (out / "points" / p / "summary.json").stat().st_mtime_ns
+                      for p in stamps}, "a finished point ran again"
+    assert _table(out / "sweep.csv") == table
+    (out / "sweep.csv").unlink()
+    assert main([str(tmp_path / "s.toml"), "--out", str(out), "--report-only"]) == 0
+    assert _table(out / "sweep.csv") == table and (out / "phase-diagram.png").is_file()
+
+
+def test_sweep_command_line(tmp_path, capsys):
+    """The command line: a bad file exits 2 with one line; --report-only rebuilds the table
+    and the phase diagram without running."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[axes]\nv = 3\n")
+    assert main([str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert "error: axes.v" in capsys.readouterr().err
+    path = _file(tmp_path)
+    assert main([str(path), "--out", str(tmp_path / "o"), "--report-only"]) == 2
+    assert "holds no sweep" in capsys.readouterr().err
+    assert main([str(path), "--out", str(tmp_path / "o"), "--workers", "0"]) == 2
+
+
+def _finished(csv_path: Path) -> int:
+    try:
+        return sum(r["status"] in ("steady", "max_steps") for r in _table(csv_path))
+    except (OSError, KeyError):
+        return 0
+
+
+def test_sweep_killed_twice_ends_with_the_uninterrupted_table(tmp_path):
+    """The command line killed (SIGTERM, as a scheduler's kill or Ctrl-C) twice while its
+    points run, then run to the end: the table is the one of a sweep never interrupted
+    (each resumed run bit for bit its uninterrupted self)."""
+    path = _file(tmp_path, axes="[0.8, 0.85, 0.9, 0.95]", steps=150)
+    cmd = [sys.executable, "-m", "fem_ade.sweep", str(path), "--workers", "2", "--quiet"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    whole = tmp_path / "whole"
+    subprocess.run([*cmd, "--out", str(whole)], check=True, env=env, timeout=600,
+                   capture_output=True)
+    out = tmp_path / "killed"
+    for _ in range(2):
+        proc = subprocess.Popen([*cmd, "--out", str(out)], env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE, text=True)
+        t0 = time.time()
+        started = _finished(out / "sweep.csv")
+        # kill once a run has checkpointed since this start (mid-run), or a point finished
+        while time.time() < t0 + 300 and proc.poll() is None:
+            if any(p.stat().st_mtime > t0 for p in (out / "points").glob("*/checkpoint.npz")) \
+                    or _finished(out / "sweep.csv") > started:
+                break
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        err = proc.communicate(timeout=120)[1]
+        assert proc.returncode == 130 and "interrupted" in err, (proc.returncode, err)
+    done = subprocess.run([*cmd, "--out", str(out)], env=env, timeout=600,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert _table(out / "sweep.csv") == _table(whole / "sweep.csv")
+    assert {r["status"] for r in _table(out / "sweep.csv")} == {"steady"}
