@@ -29,6 +29,9 @@ STEPS = (
     ("gallery", ["studies/gallery.py", "--out", f"{RESULTS}/gallery", "--max-steps", "5000"]),
     ("readme_figure", ["studies/readme_figure.py", "--out", f"{RESULTS}/readme"]),
     ("sharp_limit", ["studies/sharp_limit.py", "--out", RESULTS]),
+    ("ade_plane", ["studies/ade_plane.py", "--out", RESULTS]),
+    ("sweep_scaling", ["studies/sweep_scaling.py", "--out", RESULTS]),
+    ("phase_diagram", ["studies/phase_diagram.py", "--out", RESULTS]),
 )
 
 

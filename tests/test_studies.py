@@ -17,7 +17,7 @@ import pytest
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 SCRIPTS = sorted(STUDIES.glob("*.py"))
 #: studies whose quick mode is too long for the default suite (they run with -m slow)
-SLOW: set[str] = set()
+SLOW: set[str] = {"phase_diagram"}  # 12 sweep points with sharp seeds (test_sweep: Dask)
 
 
 def _needs_mpi(path):
@@ -217,6 +217,44 @@ def check_sharp_limit(result, out):
     assert all(a > b > row["e_sharp"] for a, b in zip(e, e[1:], strict=False)), e
     assert e[-1] < 1.5 * row["e_sharp"], e
     assert (out / "sharp_limit.md").is_file() and (out / "sharp-eps.png").is_file()
+
+
+def check_ade_plane(result, out):
+    """At v = 0.85, κ̄/κ = 1.4, m₀ 1.72–1.8: the pear below the prolate (its area difference
+    follows m₀, the prolate's stays at 1.0848), and the quick phase-field runs reported."""
+    (plane,) = result["planes"]
+    assert plane["v"] == 0.85
+    for row in plane["sharp"]:
+        assert row["lowest"] == "pear" and row["pear"] < row["prolate"] - 0.1, row
+    assert (out / "ade_plane.md").is_file() and (out / "ade-plane.png").is_file()
+    text = (out / "ade_plane.md").read_text()
+    assert "| 1.80 |" in text and "Phase field at ε = 0.05" in text
+
+
+def check_sweep_scaling(result, out):
+    """One and two local workers and an external scheduler each run every point to its end;
+    the figures are positive and finite."""
+    rows = result["rows"]
+    assert [(r["how"], r["workers"]) for r in rows] == [("local", 1), ("local", 2),
+                                                       ("external", 2)]
+    for r in rows:
+        assert r["points"] == 2 and r["wall_s"] > 0 and r["task_s_mean"] > 0
+        assert math.isfinite(r["overhead_per_task_s"]) and r["speedup"] > 0
+    assert "| external | 2 |" in (out / "sweep_scaling_quick.md").read_text()
+
+
+def check_phase_diagram(result, out):
+    """Both sweeps, small: every run ends (or fails with a reason), the notes compare the
+    lowest end state with the sharp one at each point, the pictures are drawn."""
+    assert set(result) == {"minimal", "ade"}
+    assert len(result["minimal"]) == 4 and len(result["ade"]) == 8
+    for rows in result.values():
+        for r in rows:
+            assert r["status"] in ("steady", "max_steps", "failed"), r
+            assert r["status"] != "failed" or r["reason"], r
+    text = (out / "phase_diagram_quick.md").read_text()
+    assert "| lowest end state (e) | sharp lowest (e) |" in text
+    assert (out / "phase_diagram" / "ade-quick" / "phase-diagram.png").is_file()
 
 
 ARGS = {"readme_figure": ["--steps", "2", "--n", "6"]}
