@@ -24,12 +24,12 @@ and the run's options::
 Each point (one value per axis and one seed) is one run folder ``OUT/points/NAME`` (NAME from
 its parameters, e.g. ``v=0.7_seed=prolate``), run by :func:`run_point` on a Dask worker: a
 ``LocalCluster`` of ``--workers`` processes (one thread each) by default, or the scheduler at
-``--scheduler ADDRESS`` (one started by ``dask scheduler`` / ``dask worker``, ``dask-mpi``
-or dask-jobqueue on Slurm/PBS; README "Phase diagrams"). Killed at any moment and started
-again, a sweep skips the finished points, resumes those with a checkpoint and never runs a
-point twice at once (the run folder's lock: a point whose folder another process holds is
-waited for). A point that fails (diverged, bad parameters) is recorded with its reason in
-``OUT/points/NAME.failed.json`` and the sweep goes on.
+``--scheduler ADDRESS`` (or the scheduler's JSON file: one started by ``dask scheduler`` /
+``dask worker``, ``dask-mpi`` or dask-jobqueue on Slurm/PBS; README "Phase diagrams").
+Killed at any moment and started again, a sweep skips the finished points, resumes those with
+a checkpoint and never runs a point twice at once (the run folder's lock: a point whose
+folder another process holds is waited for). A point that fails (bad parameters, an error)
+is recorded with its reason in ``OUT/points/NAME.failed.json`` and the sweep goes on.
 
 Written: ``OUT/sweep.csv`` (one row per point, rebuilt from the run folders after each point:
 an interrupted and resumed sweep ends with the table of an uninterrupted one),
@@ -212,7 +212,7 @@ def run_point(point: Point, root: str) -> dict:
         except (ModelError, ValueError, FloatingPointError) as err:
             _write_json(failed, {"point": point.name, "reason": f"{type(err).__name__}: {err}",
                                  "seconds": round(time.perf_counter() - t0, 2)})
-    return row(point, Path(root))
+    return {**row(point, Path(root)), "task_s": time.perf_counter() - t0}
 
 
 def _status(folder: Path) -> str | None:
@@ -321,8 +321,9 @@ def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | Non
         os.environ.setdefault(k, "1")  # one thread per worker process
     cluster = None
     try:
-        if scheduler:
-            client = Client(scheduler)
+        if scheduler:  # an address, or a scheduler file (dask scheduler --scheduler-file)
+            client = (Client(scheduler_file=scheduler) if Path(scheduler).is_file()
+                      else Client(scheduler))
         else:
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    dashboard_address=":0", silence_logs=40)
@@ -397,7 +398,7 @@ def main(argv=None) -> int:
     where.add_argument("--workers", type=int, default=2,
                        help="local Dask worker processes (default 2)")
     where.add_argument("--scheduler", metavar="ADDRESS",
-                       help="an existing Dask scheduler (tcp://HOST:PORT)")
+                       help="an existing Dask scheduler: tcp://HOST:PORT or its scheduler file")
     ap.add_argument("--report-only", action="store_true",
                     help="rebuild the table and the pictures from the folders; run nothing")
     ap.add_argument("--quiet", action="store_true")

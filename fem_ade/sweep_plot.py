@@ -5,6 +5,9 @@ marker coloured by its end state (its shape label; a seed's marker shape), besid
 of its point; the lowest-energy end state of each point ringed in black; a point whose seeds
 end in different states marked "×" (metastable); behind them, where the sharp reference has
 the seeds' branches, the lowest sharp branch at each point as a coloured cell.
+A sweep of one axis draws, instead of the second axis, each run's energy e = (W + G) over a
+sharp sphere's bending energy, beside the sharp energy of its seed's branch (lines): the
+lowest state along the axis and where it changes, against the sharp reference's.
 ``montage.png``: each run's ``shape.png`` (when the runs render), one row per seed.
 """
 
@@ -50,6 +53,8 @@ def phase_diagram(rows: list[dict], sweep, path: Path) -> Path:
     axes = list(sweep.axes)
     xkey = axes[0] if axes else None
     ykey = axes[1] if len(axes) > 1 else None
+    if xkey and not ykey:
+        return energy_diagram(rows, sweep, path, xkey)
     seeds = list(sweep.seeds)
     xs = sorted({r[xkey] for r in rows}) if xkey else [0]
     ys = sorted({r[ykey] for r in rows}) if ykey else [0]
@@ -97,6 +102,54 @@ def phase_diagram(rows: list[dict], sweep, path: Path) -> Path:
     ax.set_ylim(ys[0] - dy * 0.7, ys[-1] + dy * 0.7)
     ax.set_title(f"sweep {sweep.name}: end states (cells: the sharp reference's lowest "
                  "branch)", fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=110, colours=64)
+    plt.close(fig)
+    return path
+
+
+def energy_diagram(rows: list[dict], sweep, path: Path, xkey: str) -> Path:
+    """One axis: e along it per seed (markers coloured by the end state), the sharp energy of
+    each seed's branch (lines), the lowest end state per point ringed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    from .render import save_figure
+
+    seeds = list(sweep.seeds)
+    fig, ax = plt.subplots(figsize=(7.5, 5.0))
+    seen = set()
+    for i, s in enumerate(seeds):
+        mine = sorted((r for r in rows if r["seed"] == s), key=lambda r: r[xkey])
+        sharp = [(r[xkey], r["e_sharp_seed"]) for r in mine
+                 if isinstance(r.get("e_sharp_seed"), float)]
+        if sharp:
+            ax.plot(*zip(*sharp, strict=True), "-", color=_colour(s), lw=1.2)
+        for r in mine:
+            if r.get("status") in FINISHED and r.get("e") is not None:
+                seen.add(r.get("label"))
+                ax.plot(r[xkey], r["e"], MARKERS[i % len(MARKERS)], ms=8,
+                        mfc=_colour(r.get("label")), mec="0.4", mew=0.6)
+    for x in sorted({r[xkey] for r in rows}):
+        done = [r for r in rows if r[xkey] == x and r.get("status") in FINISHED
+                and r.get("e") is not None]
+        if done:
+            best = min(done, key=lambda r: r["e"])
+            ax.plot(x, best["e"], "o", ms=14, mfc="none", mec="black", mew=1.5)
+    handles = [Line2D([], [], marker="s", ls="", mfc=_colour(lab), mec="0.5", ms=8,
+                      label=f"ends {lab}") for lab in sorted(seen, key=lambda s: s or "~")]
+    handles += [Line2D([], [], marker=MARKERS[i % len(MARKERS)], ls="-", color=_colour(s),
+                       mfc="white", mec="k", ms=8, label=f"seed {s} (line: its sharp e)")
+                for i, s in enumerate(seeds)]
+    handles += [Line2D([], [], marker="o", ls="", mfc="none", mec="k", mew=1.5, ms=12,
+                       label="lowest at the point")]
+    ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.set(xlabel=xkey, ylabel="e = (W + G) / W_sphere",
+           title=f"sweep {sweep.name}: end states and energies")
+    ax.grid(alpha=0.3)
     fig.tight_layout()
     save_figure(fig, path, dpi=110, colours=64)
     plt.close(fig)

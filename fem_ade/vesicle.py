@@ -5,7 +5,8 @@ difference Δa₀, the ADE modulus κ̄/κ, a spontaneous curvature C, and the b
 starts on. :func:`vesicle_scene` maps those to the model's α, β, ΔA₀ and D, in a unit box:
 
 * R₀ (the vesicle's √(A/4π) in the box) is ``R0`` or, by default, the largest up to 0.25 with
-  which the seed keeps 3ε from the box's faces (6ε from its periodic images);
+  which the seed keeps 0.1 L + 2ε from the box's faces (0.2 L + 4ε from its periodic
+  images: nearer, a slender prolate merges with its images into a tube through the box);
 * β = 4πR₀², α = (4π/3)R₀³·v — with the **localized** volume functional, whose V is that of
   the φ = 0 surface, so that v is the sharp reduced volume of the seed (run it with exact
   constraints: ``--constraints exact``, as the ``steady`` recipe's sweeps do);
@@ -154,7 +155,9 @@ def vesicle_parts(**kw) -> dict:
         raise ModelError(f"unknown vesicle parameter(s) {', '.join(sorted(unknown))}; valid: "
                          f"{', '.join(Vesicle.__dataclass_fields__)}")
     ves = Vesicle(**kw).check()
-    margin = 3.0 * ves.eps  # the interfaces of periodic images 6ε apart: tanh tails < 3 %
+    # the seed's distance from the box's faces: its periodic images 0.2 L + 4ε apart (at 6ε
+    # a prolate's poles merged with their images' into a tube through the box, ε = 0.02)
+    margin = 0.1 * ves.L + 2.0 * ves.eps
     R0 = ves.R0 if ves.R0 is not None else 0.25 * ves.L
     c = math.sqrt(2.0) * ves.C * R0
     r, z, origin = seed_meridian(ves, c)
@@ -166,7 +169,7 @@ def vesicle_parts(**kw) -> dict:
             r, z, origin = seed_meridian(ves, c)
     elif extent * R0 > ves.L - 2.0 * margin:
         raise ModelError(f"the {ves.branch} at v = {ves.v} with R0 = {R0:g} does not fit the "
-                         f"box with 3 eps to spare (extent {extent * R0:.3g} L); "
+                         f"box with 0.1 L + 2 eps to spare (extent {extent * R0:.3g} L); "
                          "give a smaller R0 or leave it out")
     D = 2.0 * ves.eps / 3.0
     effects = {"bending", "volume", "area"}

@@ -147,3 +147,21 @@ def test_sweep_killed_twice_ends_with_the_uninterrupted_table(tmp_path):
     assert done.returncode == 0, done.stderr
     assert _table(out / "sweep.csv") == _table(whole / "sweep.csv")
     assert {r["status"] for r in _table(out / "sweep.csv")} == {"steady"}
+
+
+def test_slurm_config(tmp_path, monkeypatch):
+    """The dask-jobqueue settings for Slurm make the job script a site needs: 2 workers of 1
+    thread per job, the threads pinned, the environment activated (nothing submitted)."""
+    import importlib.util
+
+    pytest.importorskip("dask_jobqueue")
+    monkeypatch.chdir(tmp_path)
+    spec = importlib.util.spec_from_file_location(
+        "slurm_cluster", ROOT / "studies" / "sweeps" / "slurm_cluster.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    script = module.main(["--print-script"])
+    for line in ("#SBATCH --cpus-per-task=2", "#SBATCH -t 04:00:00", "#SBATCH --mem=8G",
+                 "source .venv/bin/activate", "FEM_ADE_FFT_WORKERS=1", "--nthreads 1",
+                 "--nworkers 2", "distributed.cli.dask_worker"):
+        assert line in script, line
