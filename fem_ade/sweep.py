@@ -29,7 +29,8 @@ its parameters, e.g. ``v=0.7_seed=prolate``), run by :func:`run_point` on a Dask
 Killed at any moment and started again, a sweep skips the finished points, resumes those with
 a checkpoint and never runs a point twice at once (the run folder's lock: a point whose
 folder another process holds is waited for). A point that fails (bad parameters, an error)
-is recorded with its reason in ``OUT/points/NAME.failed.json`` and the sweep goes on.
+is recorded with its reason in ``OUT/points/NAME.failed.json`` and the sweep goes on
+(started again, it skips that point unless ``--retry-failed``).
 
 Written: ``OUT/sweep.csv`` (one row per point, rebuilt from the run folders after each point:
 an interrupted and resumed sweep ends with the table of an uninterrupted one),
@@ -196,6 +197,7 @@ def run_point(point: Point, root: str) -> dict:
     failed = folder.with_name(point.name + ".failed.json")
     t0 = time.perf_counter()
     if _status(folder) not in FINISHED:
+        failed.unlink(missing_ok=True)  # a failure of before is tried again
         try:
             if (folder / "checkpoint.npz").is_file() and (folder / "run.json").is_file():
                 resume(folder, quiet=True)
@@ -300,8 +302,10 @@ def _cell(value):
 
 
 def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | None = None,
-              quiet: bool = False, retry_s: float = 2.0) -> list[dict]:
-    """Run every unfinished point on Dask; the table's rows (also written to sweep.csv)."""
+              quiet: bool = False, retry_s: float = 2.0, retry_failed: bool = False
+              ) -> list[dict]:
+    """Run every unfinished point on Dask (``retry_failed``: the failed ones too); the
+    table's rows (also written to sweep.csv)."""
     from dask.distributed import Client, LocalCluster, as_completed
 
     from .lock import FolderLock
@@ -315,7 +319,8 @@ def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | Non
                                      "seeds": sweep.seeds, "run": sweep.run,
                                      "points": [p.name for p in points]})
     rows = {p.name: row(p, out) for p in points}
-    todo = [p for p in points if rows[p.name]["status"] not in (*FINISHED, "failed")]
+    done = (*FINISHED, "failed") if not retry_failed else FINISHED
+    todo = [p for p in points if rows[p.name]["status"] not in done]
     for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
               "FEM_ADE_FFT_WORKERS"):
         os.environ.setdefault(k, "1")  # one thread per worker process
@@ -399,6 +404,8 @@ def main(argv=None) -> int:
                        help="local Dask worker processes (default 2)")
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="an existing Dask scheduler: tcp://HOST:PORT or its scheduler file")
+    ap.add_argument("--retry-failed", action="store_true",
+                    help="run the points recorded as failed again (they are skipped otherwise)")
     ap.add_argument("--report-only", action="store_true",
                     help="rebuild the table and the pictures from the folders; run nothing")
     ap.add_argument("--quiet", action="store_true")
@@ -423,7 +430,7 @@ def main(argv=None) -> int:
             write_table(rows, out / "sweep.csv", list(sweep.axes))
         else:
             rows = run_sweep(sweep, out, workers=args.workers, scheduler=args.scheduler,
-                             quiet=args.quiet)
+                             quiet=args.quiet, retry_failed=args.retry_failed)
     except FolderBusy as err:
         print(f"fem_ade.sweep: error: {err}", file=sys.stderr)
         return 2

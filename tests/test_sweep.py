@@ -92,6 +92,8 @@ def test_sweep_runs_skips_and_records_a_failure(tmp_path, capsys):
     assert stamps == {p: (out / "points" / p / "summary.json").stat().st_mtime_ns
                       for p in stamps}, "a finished point ran again"
     assert _table(out / "sweep.csv") == table
+    again = run_sweep(sweep, out, workers=2, quiet=True, retry_failed=True)  # fails again
+    assert again[2]["status"] == "failed" and "task_s" in again[2]
     (out / "sweep.csv").unlink()
     assert main([str(tmp_path / "s.toml"), "--out", str(out), "--report-only"]) == 0
     assert _table(out / "sweep.csv") == table and (out / "phase-diagram.png").is_file()
