@@ -166,14 +166,21 @@ def shape_montage(rows: list[dict], sweep, path: Path, width: int = 240) -> Path
         return None
     seeds = list(sweep.seeds)
     order = sorted({r["point"].rsplit("_seed=", 1)[0] for r, _ in cells})
+    from PIL import ImageFont
+
+    font = ImageFont.load_default(size=15)
     thumbs = {}
     for r, p in cells:
-        with Image.open(p) as im:
+        with Image.open(p) as im:  # the 3D view: the left half, below the titles
             w, h = im.size
-            im = im.convert("RGB").crop((0, int(0.17 * h), w // 2, h))
-            im = im.resize((width, round(width * im.size[1] / im.size[0])))
-        ImageDraw.Draw(im).text((4, 4), f"{r['point']}\n{r.get('label')}", fill="black")
-        thumbs[(r["point"].rsplit("_seed=", 1)[0], r["seed"])] = im
+            view = im.convert("RGB").crop((0, int(0.26 * h), w // 2, int(0.92 * h)))
+            view = view.resize((width, round(width * view.size[1] / view.size[0])))
+        cell = Image.new("RGB", (width, view.size[1] + 40), "white")
+        cell.paste(view, (0, 40))
+        name = r["point"].rsplit("_seed=", 1)[0].replace("_", " ")
+        ImageDraw.Draw(cell).text((4, 2), f"{name} · {r['seed']}\nends {r.get('label')}",
+                                  fill="black", font=font)
+        thumbs[(r["point"].rsplit("_seed=", 1)[0], r["seed"])] = cell
     h = max(t.size[1] for t in thumbs.values())
     sheet = Image.new("RGB", (width * len(order), h * len(seeds)), "white")
     for i, key in enumerate(order):
