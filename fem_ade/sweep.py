@@ -295,6 +295,25 @@ def write_table(rows: list[dict], path: Path, axes: list[str]) -> None:
     os.replace(tmp, path)
 
 
+def read_table(path: Path) -> list[dict]:
+    """The rows of a sweep.csv, numbers as numbers (what :func:`row` gives, without the run
+    folders: a committed sweep's table is enough to draw and report it again)."""
+    def parse(text):
+        if text == "":
+            return None
+        try:
+            number = float(text)
+        except ValueError:
+            return text
+        return int(number) if number.is_integer() and "." not in text and "e" not in text \
+            else number
+
+    with open(path, newline="") as fh:
+        return [{k: parse(v) if k not in ("point", "seed", "genus", "label", "status",
+                                          "reason") else v for k, v in r.items()}
+                for r in csv.DictReader(fh)]
+
+
 def _cell(value):
     if isinstance(value, float):
         return f"{value:.10g}"

@@ -62,7 +62,7 @@ FULL = {
                 pf={**{m: ("stomatocyte", "oblate") for m in (0.7, 0.78, 0.86, 0.94)},
                     **{m: ("oblate", "prolate") for m in (1.1, 1.18, 1.26)}}),
 }
-QUICK = {0.85: Plane(branches=("prolate", "pear"), m0=(1.72, 1.76, 1.8),
+QUICK = {0.85: Plane(branches=("prolate", "pear"), m0=(1.76, 1.8),
                      anchor={"prolate": 1.8, "pear": 1.8}, pf={1.8: ("prolate", "pear")})}
 #: the quick look's phase field: coarse and short
 QUICK_EPS = 0.05

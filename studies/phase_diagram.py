@@ -20,7 +20,7 @@ import json
 import math
 from pathlib import Path
 
-from fem_ade.sweep import FINISHED, Sweep, load_sweep, row, run_sweep
+from fem_ade.sweep import FINISHED, Sweep, load_sweep, read_table, row, run_sweep
 from fem_ade.sweep_plot import draw
 
 HERE = Path(__file__).resolve().parent
@@ -71,11 +71,19 @@ def sharp_torus(sweep: Sweep, at: dict) -> float | None:
     return None if res is None else float(res.e)
 
 
-def notes(name: str, sweep: Sweep, rows: list[dict]) -> list[str]:
+def notes(name: str, sweep: Sweep, rows: list[dict], out: Path) -> list[str]:
     keys = list(sweep.axes)
     cells = lowest(rows, keys)
+    cache_path = out / "sharp_torus.json"  # the torus solves: minutes for the ADE grid
+    cache = json.loads(cache_path.read_text()) if cache_path.is_file() else {}
     for at, c in cells.items():  # the torus beside the seeds' branches (not a seed itself)
-        c["e_torus"] = sharp_torus(sweep, dict(zip(keys, at, strict=True)))
+        key = ",".join(f"{x:g}" if isinstance(x, float) else str(x) for x in at)
+        if key not in cache:
+            cache[key] = sharp_torus(sweep, dict(zip(keys, at, strict=True)))
+        c["e_torus"] = cache[key]
+    out.mkdir(parents=True, exist_ok=True)
+    cache_path.write_text(json.dumps(cache, indent=0) + "\n")
+    for c in cells.values():
         c["sharp_all"] = ("torus" if c["e_torus"] is not None and c["e_torus"] < c["e_sharp"]
                           else c["sharp"])
     done = sum(r.get("status") in FINISHED for r in rows)
@@ -153,12 +161,13 @@ def main(argv=None) -> dict:
         if args.quick:
             sweep = quick(sweep)
         out = root / sweep.name
-        if args.report_only:
-            rows = [row(p, out) for p in sweep.points()]
+        if args.report_only:  # from the run folders, or without them from the table
+            rows = ([row(p, out) for p in sweep.points()] if (out / "points").is_dir()
+                    else read_table(out / "sweep.csv"))
         else:
             rows = run_sweep(sweep, out, workers=args.workers, quiet=False)
         draw(rows, sweep, out)
-        lines += notes(name, sweep, rows)
+        lines += notes(name, sweep, rows, out)
         result[name] = rows
     handwritten = root / "notes.md"
     if handwritten.is_file():
@@ -166,9 +175,6 @@ def main(argv=None) -> dict:
     root.mkdir(parents=True, exist_ok=True)
     md = args.out / ("phase_diagram_quick.md" if args.quick else "phase_diagram.md")
     md.write_text("\n".join(lines))
-    (root / "summary.json").write_text(json.dumps(
-        {k: [{c: r.get(c) for c in r if c != "task_s"} for r in v] for k, v in result.items()},
-        indent=0) + "\n")
     return result
 
 

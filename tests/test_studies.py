@@ -220,7 +220,7 @@ def check_sharp_limit(result, out):
 
 
 def check_ade_plane(result, out):
-    """At v = 0.85, κ̄/κ = 1.4, m₀ 1.72–1.8: the pear below the prolate (its area difference
+    """At v = 0.85, κ̄/κ = 1.4, m₀ 1.76 and 1.8: the pear below the prolate (its area difference
     follows m₀, the prolate's stays at 1.0848), and the quick phase-field runs reported."""
     (plane,) = result["planes"]
     assert plane["v"] == 0.85

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from fem_ade.model import ModelError
-from fem_ade.sweep import COLUMNS, load_sweep, main, run_sweep
+from fem_ade.sweep import COLUMNS, load_sweep, main, read_table, run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 #: spheres seeded at v < 1 need no sharp solve: the quickest vesicle points
@@ -92,6 +92,11 @@ def test_sweep_runs_skips_and_records_a_failure(tmp_path, capsys):
     assert stamps == {p: (out / "points" / p / "summary.json").stat().st_mtime_ns
                       for p in stamps}, "a finished point ran again"
     assert _table(out / "sweep.csv") == table
+    back = read_table(out / "sweep.csv")  # the table alone gives the rows back
+    for r, b in zip(rows, back, strict=True):
+        assert b["point"] == r["point"] and b["status"] == r["status"]
+        assert b.get("E") == pytest.approx(r.get("E"), rel=1e-9) if r.get("E") else True
+        assert b["v"] == r["v"]
     again = run_sweep(sweep, out, workers=2, quiet=True, retry_failed=True)  # fails again
     assert again[2]["status"] == "failed" and "task_s" in again[2]
     (out / "sweep.csv").unlink()
