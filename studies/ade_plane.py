@@ -62,7 +62,7 @@ FULL = {
                 pf={**{m: ("stomatocyte", "oblate") for m in (0.7, 0.78, 0.86, 0.94)},
                     **{m: ("oblate", "prolate") for m in (1.1, 1.18, 1.26)}}),
 }
-QUICK = {0.85: Plane(branches=("prolate", "pear"), m0=(1.76, 1.8),
+QUICK = {0.85: Plane(branches=("prolate", "pear"), m0=(1.76, 1.8), levels=LEVELS[:2],
                      anchor={"prolate": 1.8, "pear": 1.8}, pf={1.8: ("prolate", "pear")})}
 #: the quick look's phase field: coarse and short
 QUICK_EPS = 0.05
@@ -83,7 +83,8 @@ def follow(branch: str, v: float, plane, say=print) -> list[dict]:
     def one(i, start):
         t0 = time.perf_counter()
         try:
-            r = solve(branch, v, m0=grid[i], kbar=KBAR, tol=1e-7, levels=LEVELS_USED,
+            r = solve(branch, v, m0=grid[i], kbar=KBAR, tol=1e-7,
+                      levels=getattr(plane, "levels", LEVELS_USED),
                       start=start)
         except BranchError as err:
             rows[i] = {"branch": branch, "v": v, "m0": grid[i], "missing": str(err)}

@@ -17,7 +17,8 @@ import pytest
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 SCRIPTS = sorted(STUDIES.glob("*.py"))
 #: studies whose quick mode is too long for the default suite (they run with -m slow)
-SLOW: set[str] = {"phase_diagram"}  # 12 sweep points with sharp seeds (test_sweep: Dask)
+SLOW: set[str] = {"phase_diagram", "ade_plane"}  # sharp solves of 30-60 s (the Dask pieces:
+#: test_sweep; the continuation the ADE plane rests on: test_sharp_ref)
 
 
 def _needs_mpi(path):
