@@ -23,11 +23,19 @@ BRANCH_OF_LABEL = {"prolate": "prolate", "cylinder": "prolate", "gourd": "prolat
 SPHERE_W = 16.0 * math.sqrt(2.0) * math.pi / 3.0
 
 
-@lru_cache(maxsize=64)
-def _solve(branch: str, v: float, m0: float, kbar: float, c: float):
+@lru_cache(maxsize=256)
+def solve_cached(branch: str, v: float, m0: float, kbar: float, c: float):
+    """sharp_ref's membrane of ``branch`` to 1e-7 in e, cached per process (a run's
+    comparison and a sweep's seeds ask for the same ones); BranchError where there is none."""
     from sharp_ref.branches import LEVELS, solve
 
     return solve(branch, v, m0=m0, kbar=kbar, c=c, tol=1e-7, levels=LEVELS[:2])
+
+
+def reduced_energy(final: dict, kappa: float = 1.0) -> float:
+    """e = (W + G) / (16√2πκ/3): a run's bending and ADE energy over a sharp sphere's
+    bending energy in the model's units (the sharp reference's e)."""
+    return (final["W"] + (final.get("G") or 0.0)) / (SPHERE_W * kappa)
 
 
 #: fewer grid points per ε than this and the run's energy is not worth a comparison (its
@@ -60,12 +68,12 @@ def compare(params: Params, shape: dict | None, final: dict,
     from sharp_ref.membrane import BranchError
 
     try:
-        result = _solve(branch, v, round(m0, 4), round(kbar, 6), round(c, 4))
+        result = solve_cached(branch, v, round(m0, 4), round(kbar, 6), round(c, 4))
     except (BranchError, ValueError) as err:
         out["missing"] = str(err)
         out["line"] = f"no sharp {branch} at v = {v:.3f} to compare with ({err})"
         return out
-    e_run = (final["W"] + final.get("G", 0.0)) / (SPHERE_W * params.kappa)
+    e_run = reduced_energy(final, params.kappa)
     out.update(e_sharp=result.e, e_run=e_run, rel_diff=e_run / result.e - 1.0,
                da_sharp=result.da)
     out["line"] = (f"sharp {branch} at v = {v:.3f}: e = {result.e:.4g}; this run "

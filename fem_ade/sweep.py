@@ -208,7 +208,6 @@ def run_point(point: Point, root: str) -> dict:
                              "e_sharp": _seed_sharp_e(point)})
                 simulate(scene, out=folder, force=folder.is_dir(), quiet=True,
                          **point.options(scene))
-            failed.unlink(missing_ok=True)
         except FolderBusy as err:
             return {"point": point.name, "status": "busy", "reason": str(err)}
         except (ModelError, ValueError, FloatingPointError) as err:
@@ -233,7 +232,7 @@ def _write_json(path: Path, data) -> None:
 
 def row(point: Point, root: Path) -> dict:
     """The table row of a point, from its run folder (or its failure record)."""
-    from .sharp import SPHERE_W
+    from .sharp import reduced_energy
 
     folder = root / "points" / point.name
     out = {"point": point.name, **point.values, "seed": point.seed}
@@ -253,14 +252,14 @@ def row(point: Point, root: Path) -> dict:
     sharp = shape.get("sharp") or {}
     ref = s.get("sharp_reference") or {}
     out.update(status=s["status"], steps=s["steps"], E=f.get("E"), W=f.get("W"),
-               G=f.get("G"), e=((f.get("W") or 0.0) + (f.get("G") or 0.0)) / SPHERE_W,
+               G=f.get("G"),
+               e=reduced_energy(f, s["parameters"]["kappa"]) if "W" in f else None,
                label=shape.get("label"), components=shape.get("components"),
                genus=" ".join(str(g) for g in shape.get("genus", [])),
                v_surface=sharp.get("reduced_volume"),
                da_surface=sharp.get("reduced_area_difference"),
                e_sharp_seed=seed.get("e_sharp"), sharp_end=ref.get("e_sharp"),
-               wall_s=s.get("wall_s"), reason="" if s["status"] != "diverged" else s.get(
-                   "message", ""))
+               reason="" if s["status"] != "diverged" else s.get("message", ""))
     return out
 
 
@@ -269,15 +268,9 @@ def _seed_sharp_e(point: Point) -> float | None:
     (the solve that seeded it, cached in this process)."""
     if point.base != "vesicle":
         return None
-    from .vesicle import sharp_shape
+    from .vesicle import sharp_of
 
-    p = {**point.fixed, **point.values}
-    kbar = float(p.get("kbar", 0.0)) if p.get("da0") is not None else 0.0
-    c = 0.0  # with C the seed's c depends on R0; not tabulated
-    if p.get("C"):
-        return None
-    res = sharp_shape(point.seed, round(float(p.get("v", 0.9)), 6),
-                      round(float(p.get("da0") or 0.0), 6), round(kbar, 6), c)
+    res = sharp_of(point.seed, **point.fixed, **point.values)
     return None if res is None else float(res.e)
 
 

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from functools import lru_cache
 
 import numpy as np
 
@@ -84,18 +83,36 @@ class Vesicle:
                              f"{self.branch!r}")
         return self
 
+    @property
+    def ade(self) -> tuple[float, float]:
+        """(m₀, κ̄/κ) of the sharp model: ADE only with both ``kbar`` and ``da0`` given."""
+        on = self.kbar > 0 and self.da0 is not None
+        return (self.da0 if self.da0 is not None else 0.0), (self.kbar if on else 0.0)
 
-@lru_cache(maxsize=256)
+
 def sharp_shape(branch: str, v: float, m0: float, kbar: float, c: float):
     """The sharp membrane of ``branch`` (a :class:`sharp_ref.membrane.Result`), or None
-    where it does not exist; cached (a sweep asks for the same seed many times)."""
-    from sharp_ref.branches import LEVELS, solve
+    where it does not exist (:func:`fem_ade.sharp.solve_cached`: a sweep asks for the same
+    seed many times)."""
     from sharp_ref.membrane import BranchError
 
+    from .sharp import solve_cached
+
     try:
-        return solve(branch, v, m0=m0, kbar=kbar, c=c, tol=1e-7, levels=LEVELS[:2])
+        return solve_cached(branch, round(v, 6), round(m0, 6), round(kbar, 6), round(c, 6))
     except BranchError:
         return None
+
+
+def sharp_of(branch: str, **kw):
+    """The sharp membrane of ``branch`` (any sharp_ref branch, the torus too) with a
+    vesicle's parameters ``kw`` — the one its seed is (for the seed's branch) — or None
+    where it does not exist, or with C ≠ 0 (its c = √2·C·R₀ depends on the fitted R₀)."""
+    ves = Vesicle(**kw).check()
+    if ves.C:
+        return None
+    m0, kbar = ves.ade
+    return sharp_shape(branch, ves.v, m0, kbar, 0.0)
 
 
 def spheroid_meridian(v: float, prolate: bool, points: int = 201) -> tuple[np.ndarray, ...]:
@@ -124,8 +141,7 @@ def spheroid_meridian(v: float, prolate: bool, points: int = 201) -> tuple[np.nd
 
 def seed_meridian(ves: Vesicle, c: float) -> tuple[np.ndarray, np.ndarray, str]:
     """(r, z, where it came from) of the seed, R₀ = 1."""
-    m0 = ves.da0 if ves.da0 is not None else 0.0
-    kbar = ves.kbar if ves.da0 is not None else 0.0
+    m0, kbar = ves.ade
     if ves.branch == "sphere":
         if ves.v < 1.0:
             R = ves.v ** (1.0 / 3.0)  # a sphere of the target volume: its area relaxes up
@@ -134,7 +150,7 @@ def seed_meridian(ves: Vesicle, c: float) -> tuple[np.ndarray, np.ndarray, str]:
     attempts = [(m0, kbar, c, "the sharp shape")] + ([(0.0, 0.0, 0.0, "the sharp shape of the "
                                                      "minimal model")] if kbar or c else [])
     for mm, kb, cc, what in attempts:
-        res = sharp_shape(ves.branch, round(ves.v, 6), round(mm, 6), round(kb, 6), round(cc, 6))
+        res = sharp_shape(ves.branch, ves.v, mm, kb, cc)
         if res is not None:
             j = res.to_json(points=201)
             r = np.maximum(np.asarray(j["r"]), 0.0)  # the poles' round-off: r = -1e-17
@@ -173,7 +189,7 @@ def vesicle_parts(**kw) -> dict:
                          "give a smaller R0 or leave it out")
     D = 2.0 * ves.eps / 3.0
     effects = {"bending", "volume", "area"}
-    if ves.kbar > 0 and ves.da0 is not None:
+    if ves.ade[1]:
         effects.add("ade")
     if ves.C:
         effects.add("spontaneous_curvature")

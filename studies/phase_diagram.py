@@ -20,15 +20,16 @@ import json
 import math
 from pathlib import Path
 
+from fem_ade.sharp import BRANCH_OF_LABEL
 from fem_ade.sweep import FINISHED, Sweep, load_sweep, read_table, row, run_sweep
 from fem_ade.sweep_plot import draw
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_OUT = Path("runs/studies")
 SWEEPS = {"minimal": HERE / "sweeps" / "minimal.toml", "ade": HERE / "sweeps" / "ade.toml"}
-#: end-state labels as the sharp branches they stand for
-AS_BRANCH = {"prolate": "prolate", "cylinder": "prolate", "gourd": "prolate",
-             "chain": "prolate", "oblate": "oblate", "discocyte": "oblate", "torus": "torus"}
+#: end-state labels as the sharp branches they stand for (a run's comparison's, and a
+#: slender prolate whose long waist reads as two necks, "chain")
+AS_BRANCH = {**BRANCH_OF_LABEL, "chain": "prolate"}
 
 
 def quick(sweep: Sweep) -> Sweep:
@@ -60,14 +61,11 @@ def lowest(rows: list[dict], keys: list[str]) -> dict:
 
 def sharp_torus(sweep: Sweep, at: dict) -> float | None:
     """The sharp axisymmetric torus's e at a point of a vesicle sweep (None: none there)."""
-    from fem_ade.vesicle import sharp_shape
+    from fem_ade.vesicle import sharp_of
 
-    p = {**sweep.fixed, **at}
-    if sweep.base != "vesicle" or p.get("C"):
+    if sweep.base != "vesicle":
         return None
-    kbar = float(p.get("kbar", 0.0)) if p.get("da0") is not None else 0.0
-    res = sharp_shape("torus", round(float(p["v"]), 6), round(float(p.get("da0") or 0.0), 6),
-                      round(kbar, 6), 0.0)
+    res = sharp_of("torus", **sweep.fixed, **at)
     return None if res is None else float(res.e)
 
 

@@ -54,7 +54,7 @@ import numpy as np
 
 from fem_ade.output import write_json_atomic
 from fem_ade.render import save_figure
-from fem_ade.sharp import SPHERE_W  # a sharp sphere's W in the model's units, per κ
+from fem_ade.sharp import SPHERE_W, reduced_energy  # a sharp sphere's W (model units, per κ)
 from sharp_ref.branches import solve
 from sharp_ref.membrane import BranchError
 
@@ -232,7 +232,7 @@ def phase_field(sharp: dict, branch: str, eps: float, backend: str, *, kbar: flo
     d = res.shape  # the run's own descriptors of its final φ = 0 surface (sharp values)
     row = {"branch": branch, "v": v, "eps": eps, "n": n, "R0": R0, "backend": backend,
            "status": res.status, "steps": res.steps,
-           "e": (res.final["W"] + (res.final.get("G", 0.0) if kbar else 0.0)) / SPHERE_W,
+           "e": reduced_energy(res.final),  # G is 0 with ADE off
            "w": res.final["W"] / SPHERE_W,
            # the area difference the model's ADE term sees (the diffuse ΔA), reduced
            "da_diffuse": res.final["dA"] / (8.0 * math.pi * params.D * R0) if kbar else None,

@@ -179,7 +179,7 @@ def test_a_run_meets_its_sharp_shape(monkeypatch):
     def nowhere(branch, v, *args):  # what sharp_ref says where a branch does not exist
         raise BranchError(f"no {branch} here: the meridian crosses itself")
 
-    monkeypatch.setattr(fem_ade.sharp, "_solve", nowhere)
+    monkeypatch.setattr(fem_ade.sharp, "solve_cached", nowhere)
     missing = compare(p, {**shape, "label": "oblate"}, {"W": 1.0})
     assert missing["missing"].startswith("no oblate here")
     assert missing["line"].startswith("no sharp oblate at v = 0.800 to compare with")
