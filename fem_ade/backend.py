@@ -196,6 +196,30 @@ class BackendBase:
         m = float(np.max(np.abs(self.phi)))
         return m if math.isfinite(m) else math.nan
 
+    def describe_final(self, final: dict):
+        """(shape descriptors of the φ = 0 surface or None, (φ on the uniform grid, the
+        surface, the full descriptors)): 3D runs with a finite field (:mod:`fem_ade.shape`;
+        the axisymmetric FEM: :mod:`fem_ade.axishape`). ``final``: the diagnostics, whose
+        diffuse V, A, ΔA the reduced values use."""
+        from .shape import SHAPE_KEYS, describe, extract_surface
+
+        p = self.scene.params
+        grid = np.asarray(self.grid_phi())
+        if self.scene.dim != 3 or not np.all(np.isfinite(grid)):
+            return None, (grid, None, None)
+        surface = extract_surface(grid, p.L)
+        d = describe(grid, p.L, V=final.get("V"), A=final.get("A"),
+                     dA=final.get("dA") if p.on("ade") else None, D=p.D, surface=surface)
+        shape = {k: d["sharp"][k] if k in d["sharp"] else d[k] for k in SHAPE_KEYS}
+        shape["diffuse"] = {k: d[k] for k in ("reduced_volume", "reduced_area_difference")}
+        shape["sharp"] = d["sharp"]
+        return shape, (grid, surface, d)
+
+    def resolution_per_length(self) -> float:
+        """Grid points per L along an axis of the field the shape is measured on (the in-run
+        sharp comparison needs at least one per ε): n."""
+        return float(self.n)
+
 
 def physical_memory() -> float:
     """The machine's memory in bytes."""

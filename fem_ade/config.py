@@ -82,7 +82,7 @@ class RunConfig:
                 raise ModelError(f"{name} must be a number, got {value!r}")
         options = dict(backend_options or {})
         if n is None:  # the scene's resolution, as the backend counts it
-            n = backend_class(backend).default_n(scene, **options)
+            n = backend_class(backend, **options).default_n(scene, **options)
         dt = scene.dt if dt is None else dt
         if steps is None and until_steady is None:
             steps = scene.steps

@@ -52,9 +52,12 @@ from .model import ModelError
 # geometry helpers (periodic minimum image)
 # ---------------------------------------------------------------------------------------------
 def _offsets(points: np.ndarray, centre, L: float) -> np.ndarray:
+    """Offsets of ``points`` from ``centre``: the periodic minimum image in a box of side L,
+    the plain difference for L = ∞ (a domain that is not periodic: the axisymmetric one)."""
     c = np.asarray(centre, dtype=float).reshape((-1,) + (1,) * (points.ndim - 1))
     d = points - c
-    d -= L * np.round(d / L)
+    if math.isfinite(L):
+        d -= L * np.round(d / L)
     return d
 
 
@@ -112,6 +115,17 @@ def _directions(k: int, dim: int, plane: bool, axis: np.ndarray) -> list[np.ndar
     return out
 
 
+def _vertical(centre, axis=(0.0, 0.0, 1.0)) -> tuple[float, float] | None:
+    """(x, y) of ``centre`` when it is 3D and ``axis`` is parallel to z, else None."""
+    if len(centre) != 3 or len(axis) != 3:
+        return None
+    a = np.asarray(axis, dtype=float)
+    if not (abs(a[0]) <= 1e-12 * abs(a[2]) and abs(a[1]) <= 1e-12 * abs(a[2])):
+        return None
+    return float(centre[0]), float(centre[1])
+
+
+
 # ---------------------------------------------------------------------------------------------
 # the kinds
 # ---------------------------------------------------------------------------------------------
@@ -135,6 +149,11 @@ class Shape:
     def volume_estimate(self, variant: str = "consistent") -> float:
         """Sharp volume enclosed by s = 0 where it has a closed form, else NaN."""
         return math.nan
+
+    def axis_of_revolution(self) -> tuple[float, float] | None:
+        """(x, y) of the vertical line (parallel to z) this 3D shape is a surface of revolution
+        about, or None (the axisymmetric geometry runs only such shapes)."""
+        return None
 
     def check(self, dim: int, skip: tuple[str, ...] = ()) -> None:
         """ModelError if a field does not fit a ``dim``-dimensional scene."""
@@ -201,6 +220,11 @@ class Ellipsoid(Shape):
         return 4.0 / 3.0 * math.pi * math.prod(math.sqrt(c * a) for a in self.axes)
 
 
+    def axis_of_revolution(self):
+        if len(self.axes) != 3 or not math.isclose(self.axes[0], self.axes[1], rel_tol=1e-12):
+            return None
+        return _vertical(self.centre)
+
 @dataclass(frozen=True)
 class Sphere(Shape):
     """s = R − |x − centre|."""
@@ -217,6 +241,9 @@ class Sphere(Shape):
     def volume_estimate(self, variant="consistent"):
         return 4.0 / 3.0 * math.pi * self.radius**3
 
+
+    def axis_of_revolution(self):
+        return _vertical(self.centre)
 
 @dataclass(frozen=True)
 class Torus(Shape):
@@ -244,6 +271,9 @@ class Torus(Shape):
     def volume_estimate(self, variant="consistent"):
         return 2.0 * math.pi**2 * self.R * self.r**2
 
+
+    def axis_of_revolution(self):
+        return _vertical(self.centre, self.axis)
 
 @dataclass(frozen=True)
 class Spheres(Shape):
@@ -288,6 +318,14 @@ class Spheres(Shape):
         return s, max(self.radii)
 
 
+    def axis_of_revolution(self):
+        first = _vertical(self.centres[0])
+        if first is None or any(not (math.isclose(c[0], first[0], abs_tol=1e-12) and
+                                     math.isclose(c[1], first[1], abs_tol=1e-12))
+                                for c in self.centres):
+            return None
+        return first
+
 @dataclass(frozen=True)
 class Capsule(Shape):
     """s = radius − dist(x, the segment of ``length`` along ``axis`` centred at ``centre``)."""
@@ -309,6 +347,9 @@ class Capsule(Shape):
         r = self.radius
         return math.pi * r * r * self.length + 4.0 / 3.0 * math.pi * r**3
 
+
+    def axis_of_revolution(self):
+        return _vertical(self.centre, self.axis)
 
 @dataclass(frozen=True)
 class Starfish(Shape):
@@ -388,6 +429,9 @@ class Discocyte(Shape):
         return np.where(inside, 1.0, -1.0) * dist.reshape(rho.shape), half
 
 
+    def axis_of_revolution(self):
+        return _vertical(self.centre, self.axis)
+
 @dataclass(frozen=True)
 class Meridian(Shape):
     """A surface of revolution about ``axis`` through ``centre``, given by its meridian: the
@@ -454,6 +498,9 @@ class Meridian(Shape):
         (r1, z1), (r2, z2) = p[:-1].T, p[1:].T
         return abs(float(np.sum(math.pi / 3.0 * (z2 - z1) * (r1 * r1 + r1 * r2 + r2 * r2))))
 
+
+    def axis_of_revolution(self):
+        return _vertical(self.centre, self.axis)
 
 @dataclass(frozen=True)
 class FieldIC(Shape):

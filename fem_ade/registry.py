@@ -58,6 +58,9 @@ FEM_SOLVERS = ("auto", "fdm", "fft", "amg", "chebyshev", "jacobi")
 FEM_ORDERS = tuple(range(1, 17))
 #: the FEM's linear algebra: one process (NumPy, SciPy, pyamg) or PETSc over MPI ranks
 LINALGS = ("numpy", "petsc")
+#: the FEM's geometries: the periodic box in 3D (2D), or a surface of revolution on its
+#: meridional half-plane (r, z) (docs/model.md §11)
+GEOMETRIES = ("cartesian", "axisymmetric")
 
 
 @dataclass(frozen=True)
@@ -120,8 +123,17 @@ BACKENDS = {
             Option("linalg", str, "numpy", LINALGS,
                    "numpy (default: one process) or petsc (PETSc KSP + hypre/GAMG, the mesh "
                    "distributed over the ranks of mpirun; README 'Running on a cluster')"),
+            Option("geometry", str, "cartesian", GEOMETRIES,
+                   "cartesian (default: the periodic box) or axisymmetric: a shape that is a "
+                   "surface of revolution about a vertical axis, on its meridional half-plane "
+                   "(r, z) with the measure 2 pi r dr dz (docs/model.md §11; order 4, --n and "
+                   "a mesh graded to the membrane by default, from eps)"),
+            Option("domain", str, None, None,
+                   "axisymmetric: the half-plane R,z0,z1 (r <= R, z0 <= z <= z1; default "
+                   "L/sqrt(pi),0,L: the box's volume and height)"),
         ),
-        variants=((("linalg", "petsc"), "fem_ade.fem.petsc:PETScFEMBackend"),),
+        variants=((("geometry", "axisymmetric"), "fem_ade.fem.axisym:AxisymmetricFEMBackend"),
+                  (("linalg", "petsc"), "fem_ade.fem.petsc:PETScFEMBackend")),
     ),
     "spectral": BackendSpec(
         "spectral", "spectral_ref.solver:SpectralBackend",

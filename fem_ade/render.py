@@ -297,6 +297,84 @@ def render_shape(phi: np.ndarray, L: float, path: str | Path, *, title: str | No
     return path
 
 
+def render_meridians(M, path: str | Path, *, title: str = "", subtitle: str = "",
+                     descriptors: dict | None = None, view=DEFAULT_VIEW,
+                     size: tuple[int, int] = (1200, 600), engine: str = "auto",
+                     L: float = 1.0, axis=(0.0, 0.0)) -> Path:
+    """An axisymmetric run's picture (``M``: :class:`fem_ade.axishape.Meridians`): the
+    surface of revolution of its φ = 0 meridians (left; black: the meridional section) and
+    φ on the meridional plane, mirrored to −r (right; black: φ = 0, dashed: the graded
+    mesh's fine zone)."""
+    from matplotlib.figure import Figure
+
+    from .axishape import RevolvedSurface
+
+    S = RevolvedSurface(M, axis=(0.0, 0.0), L=L)
+    translucent = _enclosing(descriptors, S.n_components)
+    engine = choose_engine(engine)
+    lines = ([title] if title else []) + (subtitle.splitlines() if subtitle else [])
+    W, H = size
+    dpi = 100
+    fig = Figure(figsize=(W / dpi, H / dpi), dpi=dpi)
+    line_h = 26.0 / H
+    top = 0.97 - line_h * len(lines) - 30.0 / H
+    gs = fig.add_gridspec(1, 2, width_ratios=(1.0, 0.95), left=0.01, right=0.93, bottom=0.09,
+                          top=top, wspace=0.08)
+    if engine == "vtk":
+        ax3 = fig.add_subplot(gs[0])
+        px = (max(int(W * 0.5 * 2), 64), max(int(H * (top - 0.09) * 2), 64))
+        if S.n_components:
+            ax3.imshow(_render_vtk(S, px, view, 0.0, translucent), interpolation="antialiased")
+        ax3.set_axis_off()
+        _draw_triad(ax3, view)
+    else:
+        ax3 = fig.add_subplot(gs[0], projection="3d")
+        _render_mpl(ax3, S, view, translucent)
+    if not S.n_components:
+        ax3.text(0.5, 0.5, "no φ = 0 surface", transform=ax3.transAxes, ha="center")
+    ax3.set_title(f"membrane φ = 0, revolved (view az {view[0]:g}°, el {view[1]:g}°"
+                  + ("; black: the meridian)" if engine == "vtk" and S.n_components else ")"),
+                  fontsize=11)
+
+    ax = fig.add_subplot(gs[1])
+    r, z, phi = M.r, M.z, M.phi
+    xs = np.concatenate([-r[:0:-1], r])
+    sec = np.concatenate([phi[:0:-1], phi], axis=0)
+    vmax = max(1.0, float(np.max(np.abs(sec))))
+    pcm = ax.pcolormesh(xs, z, sec.T, shading="gouraud", cmap="RdBu_r", vmin=-vmax,
+                        vmax=vmax, rasterized=True)
+    for pts in M.curves:
+        for sign in (1.0, -1.0):
+            ax.plot(sign * pts[:, 0], pts[:, 1], color="k", lw=1.6)
+    R, z0, z1 = M.domain
+    if M.fine is not None:
+        (ra, rb), (za, zb) = M.fine
+        for sign in (1.0, -1.0):
+            ax.plot(sign * np.array([ra, rb, rb, ra]), [za, za, zb, zb], color="#555555",
+                    lw=0.9, ls="--")
+    ax.axvline(0.0, color="#444444", lw=0.8, ls="-.")
+    if M.curves:  # the membrane with a margin, in the domain
+        P = np.vstack(M.curves)
+        half = 1.25 * max(P[:, 0].max(), 0.5 * np.ptp(P[:, 1]), 1e-9)
+        mid = 0.5 * (P[:, 1].min() + P[:, 1].max())
+        ax.set_xlim(-min(half, R), min(half, R))
+        ax.set_ylim(max(z0, mid - half), min(z1, mid + half))
+    ax.set_aspect("equal")
+    ax.set_xlabel("r (mirrored: −r on the left)")
+    ax.set_ylabel("z")
+    ax.set_title("φ on the meridional plane (black: φ = 0; dashed: fine zone)", fontsize=12)
+    cb = fig.colorbar(pcm, ax=ax, fraction=0.046, pad=0.03)
+    cb.set_label("φ  (+1 inside, −1 outside)")
+    for k, line in enumerate(lines):
+        first = k == 0 and bool(title)
+        fig.text(0.5, 0.985 - k * line_h, line, ha="center", va="top",
+                 fontsize=14 if first else 11, fontweight="bold" if first else "normal",
+                 color="black" if first else "#333333")
+    path = Path(path)
+    _save(fig, path, dpi)
+    return path
+
+
 def _save(fig, path, dpi) -> Path:
     """Write the figure to ``path`` atomically (write, then rename): an interrupted picture
     never replaces a whole one."""
@@ -570,6 +648,9 @@ def run_label(summary: dict, n_grid: int) -> str:
     order = info.get("order")
     grid = (f"p = {order}, {n_grid} nodes per axis" if order and summary.get("backend") == "fem"
             else f"n = {n_grid}")
+    if info.get("geometry") == "axisymmetric":
+        nodes = info.get("nodes") or ["?", "?"]
+        grid = f"axisymmetric, p = {order}, {nodes[0]} x {nodes[1]} nodes (r x z)"
     head = f"{summary.get('scene', '')} [{summary.get('backend', '')}, {grid}]"
     return " — ".join(s for s in (head, when, flag) if s)
 
@@ -583,6 +664,18 @@ def draw_run(out: str | Path, phi: np.ndarray, params: Params, history,
     uniform grid, the parameters, the history columns and the descriptors (and the surface,
     if extracted already; 2D runs: the field and its zero contour). Returns the descriptors."""
     out = Path(out)
+    if descriptors is not None and descriptors.get("geometry") == "axisymmetric":
+        subtitle = summary_line(descriptors, given="diffuse, from the diagnostics")
+        v0, m0 = params.reduced_targets()
+        ade = params.on("ade")
+        subtitle += (f"\ntargets α, β{', ΔA₀' if ade else ''}: v = {v0:.3f}"
+                     + (f", Δa = {m0:.3f}" if ade else ""))
+        render_meridians(surface, out / "shape.png", title=label, subtitle=subtitle,
+                         descriptors=descriptors, view=view, size=size, engine=engine,
+                         L=params.L)
+        render_history(history, out / "history.png", params, title=label,
+                       physical_time=physical_time)
+        return descriptors
     if np.ndim(phi) == 2:
         render_field_2d(phi, params.L, out / "shape.png", title=label)
         render_history(history, out / "history.png", params, title=label,

@@ -81,9 +81,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--backend", choices=tuple(BACKENDS), default="fem",
                    help="; ".join(f"{b.name}: {b.description}" for b in BACKENDS.values())
                    + " (default fem)")
-    p.add_argument("--recipe", choices=tuple(RECIPES), default="paper",
+    p.add_argument("--recipe", choices=tuple(RECIPES), default=None,
                    help="what the run is for; sets defaults that the options below override: "
-                   + "; ".join(f"{k}: {v}" for k, v in RECIPES.items()))
+                   + "; ".join(f"{k}: {v}" for k, v in RECIPES.items())
+                   + " (default: paper for the paper's scenes, steady for the vesicle family)")
     p.add_argument("--n", type=int,
                    help="grid points (spectral) or cells (fem) per direction; the fem has "
                         "order*n nodes per direction (default: the scene's grid, in nodes: "
@@ -179,8 +180,9 @@ def list_scenes() -> str:
                      f"n={s.n:<4d} {s.description}")
     lines += ["scene families (made from physical parameters):",
               f"  {'vesicle':16s} reduced volume --v, area difference --da0, --kbar, --C, "
-              "--eps, seeded on --branch from its sharp shape (sharp_ref); e.g. vesicle --v 0.8 "
-              "--branch oblate --recipe steady --constraints exact"]
+              "--eps, seeded on --branch from its sharp shape (sharp_ref), run to a steady state "
+              "(--recipe steady); e.g. vesicle --v 0.8 --branch oblate [--geometry "
+              "axisymmetric]"]
     return "\n".join(lines)
 
 
@@ -334,6 +336,8 @@ def _main(argv, scratch: str | None = None) -> int:
                              f"{args.scene} is another")
         else:
             scene = resolve_scene(args.scene)
+        if args.recipe is None:  # the paper's numerics for its scenes; a vesicle: its shape
+            args.recipe = "steady" if args.scene == "vesicle" else "paper"
         for key, value in recipe(args.recipe, scene).items():
             if key in ("until_steady", "max_steps") and "steps" in given:
                 continue  # --steps N: N steps (with the recipe's numerics)

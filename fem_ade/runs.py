@@ -44,10 +44,6 @@ from .output import (
 from .scenes import Scene, scene_from_mapping, scene_to_mapping
 from .xdmf import XdmfSeries
 
-#: summary.json → shape: the descriptors of the sharp surface kept at its top level
-SHAPE_KEYS = ("components", "genus", "nested", "reduced_volume", "reduced_area_difference",
-              "arms", "label", "body")
-
 
 def verdict(scene: Scene, shape: dict | None) -> dict | None:
     """How the run's final shape relates to the paper's (``scene.shape``): both labels, the
@@ -60,6 +56,14 @@ def verdict(scene: Scene, shape: dict | None) -> dict | None:
     if body:
         numbers += (f", axes ratios {body['elongation']:.2f} / {body['flatness']:.2f}, "
                     f"{body['necks']} neck(s), dimple {body['dimple']:.2f}")
+    if scene.figure == "vesicle family":  # its shape is the branch it was seeded on
+        from .sharp import BRANCH_OF_LABEL
+
+        branch = BRANCH_OF_LABEL.get(shape["label"], shape["label"])
+        same = branch == scene.shape
+        line = (f"seeded on the {scene.shape} branch; this run: {shape['label']} ({numbers}) "
+                f"-> {'same branch' if same else 'left the branch'}")
+        return {"branch": scene.shape, "run": shape["label"], "same": same, "line": line}
     same = shape["label"] == scene.shape
     line = (f"paper's shape: {scene.shape} ({scene.figure}); this run: {shape['label']} "
             f"({numbers}) -> {'same' if same else 'different'}")
@@ -198,7 +202,8 @@ def scene_as_run(scene: Scene, config: RunConfig) -> Scene:
     per axis, so that the backend's default n for it is ``config.n``) and, with
     ``ic="seeded"``, its initial shape the seeded one (:mod:`fem_ade.seeds`)."""
     changes = {}
-    nodes = backend_class(config.backend).nodes_per_axis(config.n, **config.backend_options)
+    nodes = backend_class(config.backend, **config.backend_options).nodes_per_axis(
+        config.n, **config.backend_options)
     if nodes is not None and nodes != scene.n:
         changes["n"] = nodes
     if config.ic == "seeded" and not scene.ic.is_field:
@@ -555,7 +560,7 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
         from .sharp import compare
 
         result.shape["sharp_reference"] = compare(be.scene.params, result.shape, result.final,
-                                                  points=np.shape(grid[0])[0])
+                                                  points=be.resolution_per_length())
     result.final_grid = grid[0]
     if out is not None:
         with critical():  # a signal now waits for the run's last files
@@ -564,21 +569,9 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
 
 
 def describe_final(be: Backend, final: dict):
-    """(shape descriptors of the final φ = 0 surface or None, (φ on the grid, surface)):
-    3D runs with a finite field (:mod:`fem_ade.shape`)."""
-    from .shape import describe, extract_surface
-
-    p = be.scene.params
-    grid = np.asarray(be.grid_phi())
-    if be.scene.dim != 3 or not np.all(np.isfinite(grid)):
-        return None, (grid, None, None)
-    surface = extract_surface(grid, p.L)
-    d = describe(grid, p.L, V=final.get("V"), A=final.get("A"),
-                 dA=final.get("dA") if p.on("ade") else None, D=p.D, surface=surface)
-    shape = {k: d["sharp"][k] if k in d["sharp"] else d[k] for k in SHAPE_KEYS}
-    shape["diffuse"] = {k: d[k] for k in ("reduced_volume", "reduced_area_difference")}
-    shape["sharp"] = d["sharp"]
-    return shape, (grid, surface, d)
+    """(shape descriptors of the final φ = 0 surface or None, (φ on the grid, surface,
+    descriptors)): the backend's :meth:`~fem_ade.backend.BackendBase.describe_final`."""
+    return be.describe_final(final)
 
 
 def _finish(out: Path, be: Backend, result: RunResult, config: RunConfig, series, grid,

@@ -54,8 +54,15 @@ class Scene:
         ic: str = "consistent",
         perturb: float = 0.0,
         seed: int = 0,
+        periodic: bool = True,
+        perturbation=None,
     ) -> np.ndarray:
         """φ₀ at ``points`` (shape (dim, ...)).
+
+        ``periodic=False``: the shape is not repeated with the box's period (the axisymmetric
+        geometry's half-plane, which may reach beyond the box); ``perturbation``: the field ψ
+        of ``perturb`` as a function of the points (default :func:`smooth_perturbation` with
+        ``seed``).
 
         ``perturb`` > 0 adds a smooth, seeded perturbation of the level set:
         s → s + perturb · scale · ψ(x), with ψ a random combination of the periodic Fourier
@@ -71,6 +78,13 @@ class Scene:
                 f"scene {self.name} is {self.dim}D; got points of shape {points.shape}"
             )
         w = math.sqrt(2.0) * self.params.eps
+        L = self.params.L if periodic else math.inf
+
+        def psi(pts):
+            if perturbation is not None:
+                return perturbation(pts)
+            return smooth_perturbation(pts, self.params.L, seed)
+
         if self.ic.is_field:
             phi = self.ic.field_values(points, self.params.L)
             if not perturb:
@@ -81,16 +95,15 @@ class Scene:
             scale = (3.0 * volume / (4.0 * math.pi)) ** (1.0 / 3.0) if self.dim == 3 else (
                 math.sqrt(volume / math.pi))
             s = w * np.arctanh(np.clip(phi, -1.0 + 1e-12, 1.0 - 1e-12))
-            return np.tanh((s + perturb * scale * smooth_perturbation(points, self.params.L,
-                                                                      seed)) / w)
+            return np.tanh((s + perturb * scale * psi(points)) / w)
         shape = self.ic
         if ic == "seeded":
             from .seeds import seeded_shape
 
             shape = seeded_shape(self.name)
-        s, scale = shape.level(points, self.params.L, ic)
+        s, scale = shape.level(points, L, ic)
         if perturb:
-            s = s + perturb * scale * smooth_perturbation(points, self.params.L, seed)
+            s = s + perturb * scale * psi(points)
         return np.tanh(s / w)
 
     def validate(self) -> Scene:

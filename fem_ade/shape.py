@@ -67,6 +67,9 @@ from scipy.sparse.csgraph import connected_components
 
 from .model import reduced_area_difference, reduced_volume
 
+#: summary.json → shape: the descriptors of the sharp surface kept at its top level
+SHAPE_KEYS = ("components", "genus", "nested", "reduced_volume", "reduced_area_difference",
+              "arms", "label", "body")
 #: vertex coordinates are identified on a lattice of h / 2**20 (periodic images coincide to
 #: round-off; distinct marching-cubes vertices are much further apart unless φ ≈ 0 at a node)
 _QUANT = 2**20

@@ -18,7 +18,9 @@ from .model import Params
 
 #: shape label (fem_ade.shape.classify) → sharp_ref branch
 BRANCH_OF_LABEL = {"prolate": "prolate", "cylinder": "prolate", "gourd": "prolate",
-                   "oblate": "oblate", "discocyte": "oblate", "torus": "torus"}
+                   "oblate": "oblate", "discocyte": "oblate", "torus": "torus",
+                   # told apart by the axisymmetric descriptors only (fem_ade.axishape)
+                   "stomatocyte": "stomatocyte", "pear": "pear"}
 #: a sphere's bending energy in the model's units, per κ
 SPHERE_W = 16.0 * math.sqrt(2.0) * math.pi / 3.0
 

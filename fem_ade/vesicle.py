@@ -205,5 +205,5 @@ def vesicle_parts(**kw) -> dict:
                      for k, v in asdict(ves).items() if v is not None and k != "L")
     ic.check(3)
     return {"name": "vesicle", "params": params, "dt": DT_PER_EPS3 * ves.eps**3, "ic": ic,
-            "n": n, "figure": "vesicle family",
+            "n": n, "figure": "vesicle family", "shape": ves.branch,
             "description": f"vesicle: {text}; R0 = {R0:.4g}; seeded from {origin}"}

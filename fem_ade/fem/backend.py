@@ -44,6 +44,9 @@ class FEMBackend(BackendBase):
 
     name = "fem"
     extra_columns = ("krylov_its", "solve_s")
+    #: the geometry (``geometry="axisymmetric"``:
+    #: :class:`fem_ade.fem.axisym.AxisymmetricFEMBackend`)
+    geometry = "cartesian"
     #: the linear algebra: NumPy/SciPy/pyamg in one process (``--linalg petsc``:
     #: :class:`fem_ade.fem.petsc.PETScFEMBackend`, distributed over MPI ranks)
     linalg = "numpy"
@@ -53,7 +56,8 @@ class FEMBackend(BackendBase):
                  ic: str = "consistent", perturb: float = 0.0, seed: int = 0,
                  scheme: str = "paper", constraints: str = "penalty", order: int = 1,
                  mesh=None, solver: str = "auto", rtol: float | None = None,
-                 linalg: str = "numpy", start_state: dict | None = None):
+                 linalg: str = "numpy", start_state: dict | None = None,
+                 geometry: str = "cartesian", domain=None):
         t0 = time.perf_counter()
         super().__init__(scene, n=n, scheme=scheme, constraints=constraints)
         check_choice("FEM order", order, FEM_ORDERS)
@@ -62,13 +66,17 @@ class FEMBackend(BackendBase):
             raise ModelError(f"{type(self).__name__} runs with linalg={self.linalg!r}; "
                              f"make_backend('fem', ..., linalg={linalg!r}) builds the one "
                              "for it")
+        if geometry != self.geometry or (domain is not None and geometry == "cartesian"):
+            raise ModelError(f"{type(self).__name__} runs geometry={self.geometry!r}"
+                             + ("" if domain is None else " without a --domain") + "; "
+                             "make_backend('fem', ..., geometry=...) builds the one for it")
         self.order = order
-        p = self.params
-        self.mesh = fmesh.make(self.scene.dim, n, p.L, mesh)
+        self.mesh = self._make_mesh(n, mesh)
         self.space = self._space()
         self.ops = self.space  # the space's operators (K, weights, doflocs)
         self.K, self.w = self.space.K, self.space.weights
-        self.stepper = MixedStep(self.space, p, scheme=scheme, exact=self.exact, solver=solver,
+        self.stepper = MixedStep(self.space, self.params, scheme=scheme, exact=self.exact,
+                                 solver=solver,
                                  rtol=rtol, solver_factory=self.solver_factory)
         t1 = time.perf_counter()
         if start_state is not None:
@@ -98,7 +106,8 @@ class FEMBackend(BackendBase):
 
     @classmethod
     def memory_bytes(cls, scene: Scene, n: int, *, order: int = 1, mesh=None,
-                     solver: str = "auto", linalg: str = "numpy", rtol=None) -> float:
+                     solver: str = "auto", linalg: str = "numpy", rtol=None,
+                     geometry: str = "cartesian", domain=None) -> float:
         nodes = float(order * n) ** scene.dim
         kind, _ = fmesh.parse_option(mesh)
         if kind not in ("uniform", "graded"):
@@ -127,9 +136,19 @@ class FEMBackend(BackendBase):
 
     @classmethod
     def check_options(cls, scene: Scene, n: int, *, order: int = 1, mesh=None,
-                      solver: str = "auto", linalg: str = "numpy", rtol=None) -> float:
+                      solver: str = "auto", linalg: str = "numpy", rtol=None,
+                      geometry: str = "cartesian", domain=None) -> float:
         """Order, solver, mesh, linear algebra and tolerance; the node spacing h_max/p (of a
         graded mesh or a mesh file too, which is read here: its own spacing, not n's)."""
+        from ..registry import GEOMETRIES
+
+        check_choice("geometry (--geometry)", geometry, GEOMETRIES)
+        if geometry != cls.geometry:
+            raise ModelError(f"--geometry {geometry}: check through "
+                             "fem_ade.backend.check_backend")
+        if domain is not None:
+            raise ModelError("--domain R,z0,z1 sets the axisymmetric half-plane; a Cartesian "
+                             "run's domain is the scene's periodic box")
         if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or \
                 order not in FEM_ORDERS:
             raise ModelError(f"--order must be an integer from 1 to {FEM_ORDERS[-1]}, "
@@ -172,6 +191,10 @@ class FEMBackend(BackendBase):
         self.dt = float(dt)
         self.stepper.set_dt(self.dt, self.phi, self.mu, self.Kphi)
         self._setup.setdefault("solver_setup_s", time.perf_counter() - t0)
+
+    def _make_mesh(self, n: int, mesh):
+        """The mesh (:func:`fem_ade.fem.mesh.make`)."""
+        return fmesh.make(self.scene.dim, n, self.params.L, mesh)
 
     def _space(self):
         """The FEM space (:func:`fem_ade.fem.assemble.space`)."""
@@ -233,6 +256,10 @@ class FEMBackend(BackendBase):
         uniform mesh), linear interpolation on a mesh file."""
         return output.uniform_grid_field(self.mesh, self.space, self.phi,
                                          self.order * self.n)[0]
+
+    def resolution_per_length(self) -> float:
+        """p·n: the nodes per axis of :meth:`grid_phi`."""
+        return float(self.order * self.n)
 
     def output_mesh(self):
         """(points (P, 3), [(cell type, connectivity)]) with the periodic images closed.

@@ -55,19 +55,52 @@ def barycentric_weights(x: np.ndarray) -> np.ndarray:
     return lam / np.abs(lam).max()
 
 
+def derivative_matrix_at(x: np.ndarray) -> np.ndarray:
+    """D with D_ij = ℓ′_j(x_i) for the Lagrange basis of the nodes ``x`` (rows sum to zero:
+    D·1 = 0 exactly)."""
+    x = np.asarray(x, dtype=float)
+    lam = barycentric_weights(x)
+    diff = x[:, None] - x[None, :]
+    np.fill_diagonal(diff, 1.0)
+    D = (lam[None, :] / lam[:, None]) / diff
+    np.fill_diagonal(D, 0.0)
+    np.fill_diagonal(D, -D.sum(axis=1))
+    return D
+
+
 @functools.cache
 def derivative_matrix(p: int) -> np.ndarray:
     """D with D_ij = ℓ′_j(ξ_i): the derivative at the GLL points of the interpolant of nodal
     values (rows sum to zero to round-off, which is enforced: D·1 = 0 exactly)."""
     xi, _ = points_weights(p)
-    lam = barycentric_weights(xi)
-    diff = xi[:, None] - xi[None, :]
-    np.fill_diagonal(diff, 1.0)
-    D = (lam[None, :] / lam[:, None]) / diff
-    np.fill_diagonal(D, 0.0)
-    np.fill_diagonal(D, -D.sum(axis=1))
+    D = derivative_matrix_at(xi)
     D.setflags(write=False)
     return D
+
+
+@functools.cache
+def jacobi_points_weights(p: int) -> tuple[np.ndarray, np.ndarray]:
+    """The p + 1 Gauss–Lobatto–Jacobi (0, 1) points −1 = ξ₀ < … < ξ_p = 1 and weights ρ of the
+    rule ∫₋₁¹ f(ξ)(1 + ξ) dξ ≈ Σ ρ_j f(ξ_j), exact for polynomials f of degree ≤ 2p − 1.
+
+    The axisymmetric cells that touch the axis r = 0 use it (Deville, Fischer & Mund §6.7;
+    Nek5000's ``zwglj``): r = h(1 + ξ)/2 there, so ∫ f r dr = (h/2)² ∫ f (1 + ξ) dξ, and the
+    weight of the node on the axis is positive, where the GLL rule applied to f·r gives it 0
+    (a singular mass). The interior points are the roots of the Jacobi polynomial
+    P⁽¹'²⁾_{p−1} (Gauss–Jacobi nodes of the weight (1 − ξ)(1 + ξ)²); the weights are those of
+    the interpolatory rule on the points, integrated exactly by a Gauss–Legendre rule.
+    """
+    if not isinstance(p, (int, np.integer)) or p < 1:
+        raise ValueError(f"the GLJ order must be an integer >= 1, got {p}")
+    from scipy.special import roots_jacobi
+
+    inner = np.sort(roots_jacobi(p - 1, 1.0, 2.0)[0]) if p > 1 else np.zeros(0)
+    xi = np.concatenate([[-1.0], inner, [1.0]])
+    g, gw = legendre.leggauss(p + 2)  # exact for the degree p + 1 of ℓ_j(ξ)(1 + ξ)
+    rho = (interpolation_matrix_at(xi, g) * ((1.0 + g) * gw)[:, None]).sum(axis=0)
+    xi.setflags(write=False)
+    rho.setflags(write=False)
+    return xi, rho
 
 
 @functools.cache
@@ -82,13 +115,12 @@ def stiffness(p: int) -> np.ndarray:
     return K
 
 
-def interpolation_matrix(p: int, y: np.ndarray) -> np.ndarray:
-    """(len(y), p + 1): the Lagrange basis of the GLL points evaluated at y ∈ [−1, 1]
+def interpolation_matrix_at(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(len(y), len(x)): the Lagrange basis of the nodes ``x`` evaluated at ``y``
     (barycentric formula of the second kind; exact at the nodes)."""
-    xi, _ = points_weights(p)
-    lam = barycentric_weights(xi)
+    lam = barycentric_weights(np.asarray(x, dtype=float))
     y = np.asarray(y, dtype=float).ravel()
-    diff = y[:, None] - xi[None, :]
+    diff = y[:, None] - np.asarray(x)[None, :]
     exact = np.isclose(diff, 0.0, atol=1e-15, rtol=0.0)
     diff[exact] = 1.0
     terms = lam[None, :] / diff
@@ -96,3 +128,8 @@ def interpolation_matrix(p: int, y: np.ndarray) -> np.ndarray:
     rows = np.flatnonzero(exact.any(axis=1))
     B[rows] = exact[rows].astype(float)
     return B
+
+
+def interpolation_matrix(p: int, y: np.ndarray) -> np.ndarray:
+    """(len(y), p + 1): the Lagrange basis of the GLL points evaluated at y ∈ [−1, 1]."""
+    return interpolation_matrix_at(points_weights(p)[0], y)

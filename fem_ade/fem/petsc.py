@@ -426,10 +426,11 @@ class PETScFEMBackend(FEMBackend):
 
     @classmethod
     def check_options(cls, scene, n, *, order=1, mesh=None, solver="auto", linalg="petsc",
-                      rtol=None) -> float:
+                      rtol=None, geometry="cartesian", domain=None) -> float:
         """The FEM's checks, then what ``--linalg petsc`` takes (:func:`check_options`)."""
         spacing = super().check_options(scene, n, order=order, mesh=mesh, solver=solver,
-                                        linalg=linalg, rtol=rtol)
+                                        linalg=linalg, rtol=rtol, geometry=geometry,
+                                        domain=domain)
         check_options(scene, n, order=order, mesh=mesh, solver=solver)
         return spacing
 

@@ -16,6 +16,11 @@ is formed, memory O(nodes)), and μ = W⁻¹Kφ — the mixed form's −Δφ —
 division. p = 1 is the trapezoid rule (on a uniform mesh the 7-point Laplacian, 5-point in 2D).
 
 DOFs are the tensor grid of the 1D nodes in C order (the last axis fastest).
+
+Axes need not be periodic: a :class:`BoundedAxis` has natural (zero-flux) ends and p·n + 1
+nodes, and with ``radial=True`` carries the measure 2πr dr of the axisymmetric geometry
+(docs/model.md §11), with Gauss–Lobatto–Jacobi (0, 1) points in its cell at the axis r = 0.
+The product structure, and so everything below, is the same for any mix of axes.
 """
 
 from __future__ import annotations
@@ -34,6 +39,9 @@ class Axis:
 
     Node e·p + j (j = 0..p − 1) is the j-th GLL point of cell e; node N ≡ node 0.
     """
+
+    periodic = True
+    radial = False
 
     def __init__(self, vertices, order: int):
         self.vertices = np.asarray(vertices, dtype=float)
@@ -98,6 +106,134 @@ class Axis:
         return Axis(np.append(self.nodes, self.vertices[0] + self.length), 1)
 
 
+class BoundedAxis:
+    """One axis [x₀, xₙ] with natural (zero-flux) ends: cells x₀ < … < xₙ, GLL nodes of order
+    p per cell, N = p·n + 1 nodes (node e·p + j is the j-th point of cell e).
+
+    ``radial=True`` (x₀ = 0 is the axis of revolution, x = r): the 1D measure is 2πr dr, so
+    that with a plain axis along z the 2D integrals are those of the 3D body of revolution
+    (docs/model.md §11). Its weights and stiffness are
+
+        cells e ≥ 1:  wⱼ = 2π (hₑ/2) ŵⱼ rⱼ,        Kₑ = 2π (2/hₑ) Dᵀ diag(ŵ r) D
+        the cell at the axis:  wⱼ = 2π (h₀/2)² ρⱼ,   K₀ = 2π Dᵀ_J diag(ρ) D_J
+
+    (ŵ the GLL weights; ρ, D_J the Gauss–Lobatto–Jacobi (0, 1) weights and derivative
+    matrix, :func:`fem_ade.fem.gll.jacobi_points_weights`, whose nodes the axis cell uses):
+    r = h₀(1 + ξ)/2 there, so ∫ f r dr = (h₀/2)² ∫ f (1 + ξ) dξ, which GLJ integrates with a
+    positive weight at r = 0 — the GLL rule applied to f·r gives the axis node the weight 0,
+    a singular mass. Both stiffnesses are exact (degree 2p − 1 in ξ); the mass is the
+    rule's, diagonal, as on the other axes.
+    """
+
+    periodic = False
+
+    def __init__(self, vertices, order: int, radial: bool = False):
+        self.vertices = np.asarray(vertices, dtype=float)
+        self.order = p = int(order)
+        self.radial = bool(radial)
+        self.cells = n = len(self.vertices) - 1
+        if n < 1 or np.any(np.diff(self.vertices) <= 0):
+            raise ValueError("the cell vertices of an axis must increase")
+        if self.radial and self.vertices[0] != 0.0:
+            raise ValueError(f"a radial axis starts on the axis r = 0, got {self.vertices[0]}")
+        self.h = np.diff(self.vertices)
+        self.length = float(self.vertices[-1] - self.vertices[0])
+        self.size = p * n + 1
+        xi, w = gll.points_weights(p)
+        nodes = self.vertices[:-1, None] + 0.5 * self.h[:, None] * (xi[None, :] + 1.0)
+        if self.radial:
+            xj, _ = gll.jacobi_points_weights(p)
+            nodes[0] = 0.5 * self.h[0] * (xj + 1.0)
+        self.nodes = np.append(nodes[:, :-1].ravel(), self.vertices[-1])
+        weights = np.zeros(self.size)
+        np.add.at(weights, self.element_dofs, self._cell_weights())
+        self.weights = weights
+
+    def cell_xi(self, e: int) -> np.ndarray:
+        """The reference points of cell e: GLJ in the radial axis' first cell, else GLL."""
+        if self.radial and e == 0:
+            return gll.jacobi_points_weights(self.order)[0]
+        return gll.points_weights(self.order)[0]
+
+    def _cell_weights(self) -> np.ndarray:
+        """(n, p + 1): each cell's quadrature weights of the axis' measure at its nodes."""
+        _, w = gll.points_weights(self.order)
+        cw = 0.5 * self.h[:, None] * w[None, :]
+        if self.radial:
+            cw = 2.0 * np.pi * cw * self.nodes[self.element_dofs]
+            _, rho = gll.jacobi_points_weights(self.order)
+            cw[0] = 2.0 * np.pi * (0.5 * self.h[0]) ** 2 * rho
+        return cw
+
+    @functools.cached_property
+    def element_dofs(self) -> np.ndarray:
+        """(n, p + 1): the nodes of each cell (the last one is the next cell's first)."""
+        p = self.order
+        return p * np.arange(self.cells)[:, None] + np.arange(p + 1)[None, :]
+
+    @functools.cached_property
+    def stiffness(self) -> sp.csr_matrix:
+        """K₁ = Σ_e ∫ ℓ′ᵢ ℓ′ⱼ (the axis' measure), exact (class docstring); csr, N × N."""
+        p, dofs = self.order, self.element_dofs
+        D = gll.derivative_matrix(p)
+        _, w = gll.points_weights(p)
+        if self.radial:
+            r = self.nodes[dofs]  # (n, p + 1)
+            Ke = 2.0 * np.pi * (2.0 / self.h)[:, None, None] * np.einsum(
+                "ki,ek,kj->eij", D, w[None, :] * r, D)
+            xj, rho = gll.jacobi_points_weights(p)
+            DJ = gll.derivative_matrix_at(xj)
+            Ke[0] = 2.0 * np.pi * DJ.T @ (rho[:, None] * DJ)
+        else:
+            Ke = (2.0 / self.h)[:, None, None] * gll.stiffness(p)[None]
+        Ke = 0.5 * (Ke + np.transpose(Ke, (0, 2, 1)))
+        rows = np.repeat(dofs, p + 1, axis=1).ravel()
+        cols = np.tile(dofs, (1, p + 1)).ravel()
+        K = sp.csr_matrix((Ke.ravel(), (rows, cols)), shape=(self.size, self.size))
+        K.sum_duplicates()
+        K.sort_indices()
+        return K
+
+    @functools.cached_property
+    def laplacian(self) -> sp.csr_matrix:
+        """L = diag(w)⁻¹ K₁: the 1D part of −Δ in weak form (the radial one: −(1/r)(r u′)′)."""
+        return sp.diags(1.0 / self.weights) @ self.stiffness
+
+    @property
+    def gaps(self) -> np.ndarray:
+        """Distances between consecutive nodes."""
+        return np.diff(self.nodes)
+
+    def interpolation(self, y) -> sp.csr_matrix:
+        """(len(y), N): the values at the points y (clipped to the axis) of the piecewise
+        polynomial interpolant of nodal values — exact to the element's order."""
+        p = self.order
+        y = np.clip(np.asarray(y, dtype=float), self.vertices[0], self.vertices[-1])
+        cell = np.clip(np.searchsorted(self.vertices, y, side="right") - 1, 0, self.cells - 1)
+        xi = np.clip(2.0 * (y - self.vertices[cell]) / self.h[cell] - 1.0, -1.0, 1.0)
+        B = np.empty((len(y), p + 1))
+        first = cell == 0
+        if self.radial and first.any():
+            B[first] = gll.interpolation_matrix_at(self.cell_xi(0), xi[first])
+            B[~first] = gll.interpolation_matrix(p, xi[~first])
+        else:
+            B[:] = gll.interpolation_matrix(p, xi)
+        rows = np.repeat(np.arange(len(y)), p + 1)
+        cols = self.element_dofs[cell].ravel()
+        M = sp.csr_matrix((B.ravel(), (rows, cols)), shape=(len(y), self.size))
+        M.sum_duplicates()
+        return M
+
+    def lor(self) -> BoundedAxis:
+        """The low-order refined axis: p = 1 on this axis' nodes."""
+        return BoundedAxis(self.nodes, 1, radial=self.radial)
+
+
+#: 1D operators of axes with more nodes than this are applied as sparse matrices (measured,
+#: axisymmetric p = 4: at 257 × 449 nodes the dense products take 9× the sparse ones' time)
+DENSE_LIMIT = 128
+
+
 def along(A, X: np.ndarray, axis: int) -> np.ndarray:
     """A (dense, or sparse) applied along ``axis`` of X: one BLAS-3 product, no transposes.
 
@@ -105,6 +241,9 @@ def along(A, X: np.ndarray, axis: int) -> np.ndarray:
     along the middle axis takes 0.8 ms dense against 2.9 ms as a scipy sparse product after
     a transpose (measured, 3D, p = 4)."""
     if sp.issparse(A):
+        if axis == X.ndim - 1:  # the last axis: X (pre, N) Aᵀ = (A Xᵀ)ᵀ
+            pre = X.reshape(-1, X.shape[-1])
+            return np.asarray((A @ pre.T).T).reshape(X.shape[:-1] + (A.shape[0],))
         Xm = np.moveaxis(X, axis, 0)
         Y = A @ Xm.reshape(Xm.shape[0], -1)
         return np.moveaxis(np.asarray(Y).reshape((A.shape[0],) + Xm.shape[1:]), 0, axis)
@@ -128,8 +267,12 @@ class TensorSpace:
     basis = None
 
     def __init__(self, axes, order: int):
+        """``axes``: per axis, the cell vertices of a periodic :class:`Axis` of ``order``, or
+        an axis object (:class:`Axis`, :class:`BoundedAxis`) of that order."""
         self.order = int(order)
-        self.axes = [Axis(a, order) for a in axes]
+        self.axes = [a if isinstance(a, (Axis, BoundedAxis)) else Axis(a, order) for a in axes]
+        if any(a.order != self.order for a in self.axes):
+            raise ValueError("the axes of a tensor space must have its order")
         self.dim = len(self.axes)
         self.shape = tuple(a.size for a in self.axes)
         self.n_dofs = int(np.prod(self.shape))
@@ -156,12 +299,17 @@ class TensorSpace:
         """True when every 1D operator is circulant — p = 1 on a uniform mesh (for p = 2 the
         nodes are equally spaced too, but their weights alternate): then the real FFT
         diagonalizes them."""
-        return self.order == 1 and all(np.allclose(a.gaps, a.gaps[0], rtol=1e-12, atol=0)
-                                       for a in self.axes)
+        return self.order == 1 and all(
+            a.periodic and np.allclose(a.gaps, a.gaps[0], rtol=1e-12, atol=0)
+            for a in self.axes)
 
     @functools.cached_property
-    def _dense_laplacians(self) -> list[np.ndarray]:
-        return [np.ascontiguousarray(a.laplacian.toarray()) for a in self.axes]
+    def _dense_laplacians(self) -> list:
+        """The 1D Lₐ as dense arrays up to :data:`DENSE_LIMIT` nodes (one BLAS product along
+        the axis is faster than a sparse one there), sparse beyond (banded: O(pN) per line
+        against O(N²))."""
+        return [np.ascontiguousarray(a.laplacian.toarray()) if a.size <= DENSE_LIMIT
+                else a.laplacian.tocsr() for a in self.axes]
 
     def laplacian(self, x: np.ndarray) -> np.ndarray:
         """μ = W⁻¹Kx = Σₐ Lₐ x (sum factorization; x may be a stack (k, N))."""
@@ -196,7 +344,7 @@ class TensorSpace:
         one; its M + sK is what AMG preconditions for p > 1)."""
         if self.order == 1:
             return self
-        return TensorSpace([np.append(a.nodes, a.vertices[0] + a.length) for a in self.axes], 1)
+        return TensorSpace([a.lor() for a in self.axes], 1)
 
     def interpolate_to(self, points_per_axis) -> np.ndarray:
         """(values) → the interpolant on the tensor grid of the given 1D points, as a function
