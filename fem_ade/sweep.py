@@ -15,7 +15,7 @@ and the run's options::
     [axes]                                # swept: a list, or {start, stop, num}
     v = [0.7, 0.9]
     [run]                                 # fem_ade.runs.simulate's options; recipe expands
-    recipe = "steady"
+    recipe = "steady"                     #   (geometry = "axisymmetric": the FEM's, §11)
     backend = "spectral"
     n = 16
     max_steps = 20
@@ -64,7 +64,7 @@ RUN_KEYS = {"recipe": str, "backend": str, "n": int, "dt": float, "steps": int,
             "until_steady": float, "max_steps": int, "every": int, "scheme": str,
             "constraints": str, "accelerate": bool, "perturb": float,
             "checkpoint_every": int, "render": bool, "backend_options": dict,
-            "allow_underresolved": bool}
+            "allow_underresolved": bool, "geometry": str}
 #: the table's columns (the axes' names come first, after ``point``; no timings: a resumed
 #: sweep's table is the uninterrupted one's, and each run's times are in its summary.json)
 COLUMNS = ("seed", "status", "steps", "E", "W", "G", "e", "label", "components", "genus",
@@ -95,6 +95,9 @@ class Point:
 
         run = dict(self.run)
         kw = recipe(run.pop("recipe"), scene) if "recipe" in run else {}
+        if "geometry" in run:  # the FEM's geometry (docs/model.md §11): a backend option
+            run["backend_options"] = {**run.get("backend_options", {}),
+                                      "geometry": run.pop("geometry")}
         if "steps" in run:
             kw.pop("until_steady", None)
             kw.pop("max_steps", None)

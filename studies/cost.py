@@ -206,6 +206,16 @@ def report(result: dict, out: Path, suffix: str) -> None:
         lines += [f"| {p['label']} | {p['n']} | {p['nodes']} | {p['steps']} | "
                   f"{p['cpu_s']:.3g} | {p['E_err']:.2e} |" for p in st["points"]]
         lines.append("")
+    axi = out / "axisymmetric.md"
+    if axi.is_file() and not suffix:  # the axisymmetric geometry's cost (its own study)
+        text = axi.read_text()
+        start = text.find("## What a steady state costs")
+        if start >= 0:
+            end = text.find("\n## ", start + 3)
+            section = text[start:] if end < 0 else text[start:end]
+            lines += ["## The axisymmetric geometry against 3D (from `axisymmetric.md`, "
+                      "written by `studies/axisymmetric.py`)", "",
+                      section.split("\n", 1)[1].strip(), ""]
     notes = out / "cost_notes.md"
     if notes.is_file() and not suffix:
         lines += [notes.read_text()]

@@ -2,8 +2,9 @@
 
 Every study writes under ``runs/`` (ignored by git) unless told otherwise; this script runs
 each of them with the committed folder as ``--out``, in an order where each finds what it
-reads (cost.py reads convergence.json). The whole set takes hours on 2 cores (the gallery
-most of them); ``--only`` picks studies, ``--dry-run`` prints the commands.
+reads (cost.py reads convergence.json and axisymmetric.md). The whole set takes hours on 2
+cores (the gallery most of them); ``--only`` picks studies, ``--dry-run`` prints the
+commands.
 
     python studies/regenerate.py --dry-run
     python studies/regenerate.py --only convergence cost bench
@@ -21,6 +22,7 @@ RESULTS = "studies/results"
 #: (name, the script and its arguments), in the order they run
 STEPS = (
     ("convergence", ["studies/convergence.py", "--out", RESULTS]),
+    ("axisymmetric", ["studies/axisymmetric.py", "--out", RESULTS]),
     ("cost", ["studies/cost.py", "--out", RESULTS]),
     ("bench", ["studies/bench.py", "--out", RESULTS]),
     ("scaling", ["studies/scaling.py", "--out", RESULTS]),

@@ -98,6 +98,29 @@ class Cache:
         return self.rows.get(key)
 
 
+def ade_sharp(cache: Cache, branch: str, v: float, m0: float, kbar: float,
+              compute: bool = True) -> dict | None:
+    """The sharp membrane with area-difference elasticity (κ̄/κ = ``kbar``, m₀), cached in
+    the same file as the minimal model's under "ade:BRANCH@V/m0=M0/kbar=K"."""
+    key = f"ade:{_key(branch, v)}/m0={m0:g}/kbar={kbar:g}"
+    if key not in cache.rows and compute:
+        t0 = time.perf_counter()
+        try:
+            solved = solve(branch, v, m0=m0, kbar=kbar).to_json()
+            row = {k: solved[k] for k in ("branch", "v", "w", "e", "da", "converged",
+                                          "residual")}
+            row["r"], row["z"] = ([round(x, 7) for x in solved[k]] for k in ("r", "z"))
+        except BranchError as err:
+            row = {"branch": branch, "v": v, "missing": str(err)}
+        row.update(m0=m0, kbar=kbar, seconds=round(time.perf_counter() - t0, 1))
+        print(f"  {key}: " + (f"e = {row['e']:.10f}" if "e" in row else row["missing"]),
+              flush=True)
+        cache.rows[key] = row
+        cache.path.parent.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(cache.path, dict(sorted(cache.rows.items())), indent=0)
+    return cache.rows.get(key)
+
+
 def crossing(cache: Cache, upper: str, lower: str, guess: float, compute: bool = True) -> dict:
     """The v where ``upper`` (lowest above it) and ``lower`` (lowest below) have equal w:
     the root of a quadratic through their differences at three v, 0.01 apart, that bracket
@@ -142,13 +165,32 @@ GENUS0 = ("sphere", "oblate", "discocyte", "prolate")
 LABELS = {"sphere": GENUS0, "torus": ("torus",),
           "prolate": ("prolate", "cylinder", "gourd", "chain"),
           "oblate": ("oblate", "discocyte"),
-          "stomatocyte": GENUS0}
+          # the axisymmetric descriptors tell the stomatocyte (one pole invaginated) apart
+          "stomatocyte": GENUS0 + ("stomatocyte",)}
 DA_TOL = 0.12
 MARGIN = 4.75 * max(EPS)
 #: the finest two only for the cases given with --fine (the cost grows like ε⁻⁴): by default
 #: those that keep their branch at ε = 0.016; ``FINE_STOP``: where a case stops (the sphere's
 #: steady state is slow to settle: 2350 steps at ε = 0.0128)
 FINE = (0.0128, 0.01)
+#: the axisymmetric FEM's column (docs/model.md §11): every case at ε = 0.04 … 0.0025, order
+#: 8 at ``AXI_NODES_PER_EPS`` nodes per ε, and at the two smallest ε again at
+#: ``AXI_CHECK_NODES_PER_EPS`` (the difference bounds the discretization error of the first;
+#: it is largest against the ε effect, which falls like ε², where ε is smallest)
+AXI_EPS = (0.04, 0.02, 0.01, 0.005, 0.0025)
+AXI_ORDER, AXI_NODES_PER_EPS, AXI_CHECK_NODES_PER_EPS = 8, 3.5, 2.5
+#: stage ``ade`` (the ADE term as ε → 0, axisymmetric): (branch, v, m₀) at κ̄/κ = ADE_KBAR —
+#: a torus, a prolate and a pear with the area difference away from its relaxed value
+ADE_KBAR = 1.4
+ADE_CASES = (("torus", 0.65, 1.3), ("prolate", 0.85, 1.4), ("pear", 0.85, 1.6))
+#: stage ``transitions`` (axisymmetric): where the phase field's lowest branch changes at each
+#: ε, from seeded steady states on three points around the sharp transition — the minimal
+#: model's (upper branch, lower branch, v) and the ADE plane's prolate → pear at v = 0.85,
+#: κ̄/κ = ADE_KBAR, along m₀
+TRANSITION_EPS = (0.02, 0.01, 0.005, 0.0025)
+MINIMAL_TRANSITIONS = (("prolate", "oblate", (0.62, 0.65, 0.68)),
+                       ("oblate", "stomatocyte", (0.56, 0.59, 0.62)))
+PEAR_TRANSITION = (0.85, ("prolate", "pear"), (1.48, 1.53, 1.58))
 FINE_CASES = ("sphere@1.0000", "torus@free", "prolate@0.9500", "prolate@0.8000", "prolate@0.6500",
               "prolate@0.6000", "prolate@0.5500", "oblate@0.9500", "oblate@0.8000",
               "oblate@0.5500")
@@ -162,10 +204,21 @@ FINE_STOP = {"sphere@1.0000": 0.0128}
 Plan = SimpleNamespace
 FULL = Plan(grid=GRID, columns=COLUMNS, transitions=TRANSITIONS, eps=EPS, cases=EPS_CASES,
             fine=FINE_CASES, fem_cases=("sphere@1.0000", "torus@free", "prolate@0.9500",
-                                        "prolate@0.8000", "oblate@0.9500", "oblate@0.8000"))
+                                        "prolate@0.8000", "oblate@0.9500", "oblate@0.8000"),
+            axi_eps=AXI_EPS, ade_cases=ADE_CASES, transition_eps=TRANSITION_EPS,
+            minimal_transitions=MINIMAL_TRANSITIONS, pear_transition=PEAR_TRANSITION)
 #: a look in seconds: the prolate and oblate at v = 0.8, three coarse ε, no transitions
 QUICK = Plan(grid=(0.8,), columns=("prolate", "oblate"), transitions=(),
-             eps=(0.08, 0.064, 0.05), cases=(("prolate", 0.8),), fine=(), fem_cases=())
+             eps=(0.08, 0.064, 0.05), cases=(("prolate", 0.8),), fine=(), fem_cases=(),
+             axi_eps=(0.08, 0.064, 0.05), ade_cases=(), transition_eps=(),
+             minimal_transitions=(), pear_transition=None)
+
+
+def eps_of(plan, backend: str) -> tuple[float, ...]:
+    """The ε of a backend's column (the axisymmetric check: the two smallest)."""
+    if backend == "axisymmetric-check":
+        return tuple(sorted(plan.axi_eps)[:2])
+    return plan.axi_eps if backend.startswith("axisymmetric") else plan.eps
 
 
 def _case_key(backend: str, branch: str, v, eps: float) -> str:
@@ -224,18 +277,26 @@ def phase_field(sharp: dict, branch: str, eps: float, backend: str, *, kbar: flo
     n = round(NODES_PER_EPS / eps)
     scene = Scene(name=f"sharp-{branch}", params=params, dt=0.0075 * eps**3, ic=ic,
                   n=n).validate()
-    options = {"backend": "spectral", "n": n} if backend == "spectral" else {
-        "backend": "fem", "n": n // 4, "backend_options": {"order": 4}}
+    if backend.startswith("axisymmetric"):
+        npe = AXI_CHECK_NODES_PER_EPS if backend.endswith("check") else AXI_NODES_PER_EPS
+        n = math.ceil(npe / (eps * AXI_ORDER) - 1e-9)
+        options = {"backend": "fem", "n": n,
+                   "backend_options": {"geometry": "axisymmetric", "order": AXI_ORDER}}
+    else:
+        options = {"backend": "spectral", "n": n} if backend == "spectral" else {
+            "backend": "fem", "n": n // 4, "backend_options": {"order": 4}}
     t0 = time.perf_counter()
     res = simulate(scene, **recipe("steady", scene), **options, every=50, render=False)
     seconds = time.perf_counter() - t0
     d = res.shape  # the run's own descriptors of its final φ = 0 surface (sharp values)
     row = {"branch": branch, "v": v, "eps": eps, "n": n, "R0": R0, "backend": backend,
-           "status": res.status, "steps": res.steps,
+           "status": res.status, "steps": res.steps, "cpu_s": round(res.cpu_s
+                                                                  + res.setup_cpu_s, 2),
            "e": reduced_energy(res.final),  # G is 0 with ADE off
            "w": res.final["W"] / SPHERE_W,
            # the area difference the model's ADE term sees (the diffuse ΔA), reduced
            "da_diffuse": res.final["dA"] / (8.0 * math.pi * params.D * R0) if kbar else None,
+           "G": res.final["G"], "W": res.final["W"],
            "label": d["label"], "components": d["components"], "genus": d["genus"],
            "da": d["reduced_area_difference"], "v_surface": d["reduced_volume"],
            "seconds": round(seconds, 1)}
@@ -284,8 +345,8 @@ def eps_rows(runs: dict, cache: Cache, backend: str, plan) -> list[dict]:
         sharp = cache.get(branch, v, compute=False)
         if sharp is None or "w" not in sharp:
             continue
-        found = [runs[k] for k in (_case_key(backend, branch, v, e) for e in plan.eps)
-                 if k in runs]
+        found = [runs[k] for k in (_case_key(backend, branch, v, e)
+                                   for e in eps_of(plan, backend)) if k in runs]
         if not found:
             continue
         for r in found:  # the rule of today, not of when the run was made
@@ -303,6 +364,13 @@ def eps_rows(runs: dict, cache: Cache, backend: str, plan) -> list[dict]:
             e0, p, observed = extrapolate([r["eps"] for r in good], [r["e"] for r in good])
             row.update(e_extrapolated=e0, order=p, order_observed=observed,
                        rel_diff=e0 / sharp["w"] - 1.0)
+        if backend == "axisymmetric":  # the discretization error over the ε effect
+            ratios = []
+            for r in found:
+                check = runs.get(_case_key("axisymmetric-check", branch, v, r["eps"]))
+                if check is not None and r["kept_branch"] and abs(r["e"] - sharp["w"]) > 0:
+                    ratios.append(abs(r["e"] - check["e"]) / abs(r["e"] - sharp["w"]))
+            row["disc_over_eps_effect"] = max(ratios) if ratios else None
         rows.append(row)
     return rows
 
@@ -356,24 +424,33 @@ def report(cache: Cache, out: Path, plan=FULL) -> dict:
     runs_path = out / "sharp" / "runs.json"
     runs = json.loads(runs_path.read_text()) if runs_path.is_file() else {}
     eps_table = []
-    for backend in ("spectral", "fem"):
+    names = {"spectral": "spectral", "fem": "FEM, order 4 on the same nodes",
+             "axisymmetric": f"axisymmetric FEM, order {AXI_ORDER}, {AXI_NODES_PER_EPS:g} "
+                             "nodes per ε"}
+    for backend in ("spectral", "fem", "axisymmetric"):
         rows_b = eps_rows(runs, cache, backend, plan)
         if not rows_b:
             continue
         eps_table += rows_b
-        name = "spectral" if backend == "spectral" else "FEM, order 4 on the same nodes"
-        lines += ["", f"## The limit ε → 0 ({name})", "",
-                  f"e = W / W_sphere,sharp at ε = {', '.join(str(e) for e in plan.eps)} (n = "
-                  f"{', '.join(str(round(NODES_PER_EPS / e)) for e in plan.eps)}); † the run left "
-                  "the branch (its label); p the observed order; e₀ the extrapolation; gap/ε "
-                  "the sharp surface's narrowest passage (a waist, a neck, a thin centre, a "
-                  "torus's hole) over the smallest ε run.", "",
-                  "| branch | v | R₀ | gap/ε | " + " | ".join(f"ε = {e}" for e in plan.eps)
-                  + " | p | e₀ | sharp | e₀/sharp − 1 |",
-                  "|---|---|---|---|" + "---|" * len(plan.eps) + "---|---|---|---|"]
+        eps_b = eps_of(plan, backend)
+        axi = backend == "axisymmetric"
+        grid_note = (f"(n = {', '.join(str(round(NODES_PER_EPS / e)) for e in eps_b)})"
+                     if not axi else f"(order {AXI_ORDER}, {AXI_NODES_PER_EPS:g} nodes per ε; "
+                     f"disc/Δε: the largest |e(3.5/ε) − e({AXI_CHECK_NODES_PER_EPS:g}/ε)| over "
+                     "|e − e_sharp| along ε, a bound on the discretization error over the ε "
+                     "effect)")
+        lines += ["", f"## The limit ε → 0 ({names[backend]})", "",
+                  f"e = W / W_sphere,sharp at ε = {', '.join(str(e) for e in eps_b)} "
+                  f"{grid_note}; † the run left the branch (its label); p the observed order; "
+                  "e₀ the extrapolation; gap/ε the sharp surface's narrowest passage (a "
+                  "waist, a neck, a thin centre, a torus's hole) over the smallest ε run.", "",
+                  "| branch | v | R₀ | gap/ε | " + " | ".join(f"ε = {e}" for e in eps_b)
+                  + " | p | e₀ | sharp | e₀/sharp − 1 |" + (" disc/Δε |" if axi else ""),
+                  "|---|---|---|---|" + "---|" * len(eps_b) + "---|---|---|---|"
+                  + ("---|" if axi else "")]
         for r in rows_b:
             cells = []
-            for e in plan.eps:
+            for e in eps_b:
                 if e in r["eps"]:
                     i = r["eps"].index(e)
                     cells.append(f"{r['e_phase_field'][i]:.5f}" + (
@@ -382,30 +459,41 @@ def report(cache: Cache, out: Path, plan=FULL) -> dict:
                     cells.append("")
             ex = r["e_extrapolated"]
             g = "—" if r["gap_over_eps"] is None else f"{r['gap_over_eps']:.1f}"
+            disc = ""
+            if axi:
+                d = r.get("disc_over_eps_effect")
+                disc = " " + ("—" if d is None else f"{d:.1e}") + " |"
             lines.append(f"| {r['branch']} | {r['v']:.4f} | {r['R0']:.3f} | {g} | "
                          + " | ".join(cells)
                          + (f" | {r['order']:.2f}{'' if r['order_observed'] else ' (assumed)'} | "
                             f"{ex:.5f} | {r['e_sharp']:.5f} | "
                             f"{r['rel_diff']:+.2%} |" if ex is not None else
-                            f" | | | {r['e_sharp']:.5f} | — |"))
+                            f" | | | {r['e_sharp']:.5f} | — |") + disc)
         lines.append("")
-        for eps in plan.eps:
+        for eps in eps_b:
             costs = [x for k, x in runs.items() if k.startswith(backend + "/")
                      and x["eps"] == eps]
             if costs:
+                cpu = [c["cpu_s"] for c in costs if "cpu_s" in c]
                 lines += [f"- ε = {eps} (n = {costs[0]['n']}): a run took "
                           f"{min(c['seconds'] for c in costs):.0f}–"
                           f"{max(c['seconds'] for c in costs):.0f} s, "
                           f"{min(c['steps'] for c in costs)}–{max(c['steps'] for c in costs)} "
-                          "steps (wall, this 2-core machine)"]
+                          "steps (wall, this 2-core machine"
+                          + (f"; {min(cpu):.2g}–{max(cpu):.2g} s CPU of the set-up and loop"
+                             if cpu else "") + ")"]
     if eps_table:
         lines += ["", "![e over e_sharp against ε²](sharp-eps.png)", "",
                   "![the phase field's φ = 0 over the sharp meridian](sharp-sections.png)", ""]
+    ade = ade_rows(cache, runs, plan)
+    lines += ade_report(ade)
+    trans = transition_rows(cache, runs, plan)
+    lines += transitions_report(trans, plan)
     notes = out / "sharp" / "notes.md"
     if notes.is_file():
         lines += [notes.read_text().strip(), ""]
     (out / "sharp_limit.md").write_text("\n".join(lines))
-    payload = {"rows": eps_table,
+    payload = {"rows": eps_table, "ade": ade, "phase_field_transitions": trans,
                "branches": [{k: r[k] for k in r if k not in ("r", "z")} for r in rows],
                "exact": [{k: r[k] for k in r if k not in ("r", "z")} for r in extra if r],
                "lowest": table, "transitions": crossings}
@@ -462,7 +550,8 @@ def eps_figures(table: list[dict], runs: dict, cache: Cache, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    cases = [r for r in table if r["backend"] == "spectral"] or table
+    cases = ([r for r in table if r["backend"] == "axisymmetric"]
+             or [r for r in table if r["backend"] == "spectral"] or table)
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
     for ax, branches in zip(axes, (("sphere", "torus", "prolate"), ("oblate",),
                                    ("stomatocyte",)), strict=True):
@@ -533,10 +622,11 @@ def run_eps(cache: Cache, out: Path, backend: str, plan, only=None, fine=()) -> 
         sharp = cache.get(branch, v)
         if "w" not in sharp:
             continue
-        for eps in plan.eps:
+        for eps in eps_of(plan, backend):
             key = _case_key(backend, branch, v, eps)
-            if key in runs or (eps in FINE and _key(branch, v) not in fine) or (
-                    eps < FINE_STOP.get(_key(branch, v), 0.0)):
+            axi = backend.startswith("axisymmetric")
+            if key in runs or (not axi and eps in FINE and _key(branch, v) not in fine) or (
+                    not axi and eps < FINE_STOP.get(_key(branch, v), 0.0)):
                 continue
             row = phase_field(sharp, branch, eps, backend)
             print(f"  {key}: e = {row['e']:.6f} (sharp {sharp['w']:.6f}), {row['label']}"
@@ -550,6 +640,219 @@ def run_eps(cache: Cache, out: Path, backend: str, plan, only=None, fine=()) -> 
             write_json_atomic(path, runs, indent=None)
 
 
+def _ade_key(branch, v, m0, eps) -> str:
+    return f"axisymmetric-ade/{_key(branch, v)}/m0={m0:g}/{eps:.4f}"
+
+
+def run_ade(cache: Cache, out: Path, plan) -> None:
+    """Stage ``ade``: each ADE case at every ε of the axisymmetric column."""
+    path = out / "sharp" / "runs.json"
+    runs = json.loads(path.read_text()) if path.is_file() else {}
+    for branch, v, m0 in plan.ade_cases:
+        sharp = ade_sharp(cache, branch, v, m0, ADE_KBAR)
+        if sharp is None or "e" not in sharp:
+            continue
+        for eps in plan.axi_eps:
+            key = _ade_key(branch, v, m0, eps)
+            if key in runs:
+                continue
+            row = phase_field(sharp, branch, eps, "axisymmetric", kbar=ADE_KBAR, m0=m0)
+            row.pop("section")
+            row["m0"] = m0
+            print(f"  {key}: e = {row['e']:.6f} (sharp {sharp['e']:.6f}), da diffuse "
+                  f"{row['da_diffuse']:.5f}, surface {row['da']:.5f} (sharp {sharp['da']:.5f}),"
+                  f" {row['label']}, {row['steps']} steps, {row['seconds']} s", flush=True)
+            runs[key] = row
+            write_json_atomic(path, runs, indent=None)
+
+
+def slope(eps: list[float], err: list[float]) -> float | None:
+    """The observed order: the least-squares slope of log|err| against log ε over the three
+    smallest ε (None with fewer, or where an error is 0)."""
+    pts = sorted(zip(eps, err, strict=True))[:3]
+    if len(pts) < 3 or any(e == 0 for _, e in pts):
+        return None
+    x = np.log([p[0] for p in pts])
+    y = np.log([abs(p[1]) for p in pts])
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def ade_rows(cache: Cache, runs: dict, plan) -> list[dict]:
+    """Per ADE case: along ε, the model's (diffuse) and the φ = 0 surface's reduced area
+    difference, G and W against the sharp membrane's, and their observed orders."""
+    c = 3.0 * math.pi * ADE_KBAR / (2.0 * math.sqrt(2.0))  # G / W_sphere = c (m − m₀)²
+    out = []
+    for branch, v, m0 in plan.ade_cases:
+        sharp = ade_sharp(cache, branch, v, m0, ADE_KBAR, compute=False)
+        if sharp is None or "e" not in sharp:
+            continue
+        found = [runs[k] for k in (_ade_key(branch, v, m0, e) for e in plan.axi_eps)
+                 if k in runs]
+        found = [r for r in found if r["kept_branch"]]
+        if not found:
+            continue
+        g_sharp = sharp["e"] - sharp["w"]
+        row = {"branch": branch, "v": v, "m0": m0, "kbar": ADE_KBAR, "da_sharp": sharp["da"],
+               "g_sharp": g_sharp, "w_sharp": sharp["w"], "e_sharp": sharp["e"],
+               "eps": [r["eps"] for r in found],
+               "da_diffuse": [r["da_diffuse"] for r in found],
+               "da_surface": [r["da"] for r in found],
+               "g": [r["G"] / SPHERE_W for r in found], "w": [r["W"] / SPHERE_W for r in found],
+               "e": [r["e"] for r in found], "labels": [r["label"] for r in found]}
+        for name, values, ref in (("da_diffuse", row["da_diffuse"], sharp["da"]),
+                                  ("da_surface", row["da_surface"], sharp["da"]),
+                                  ("g", row["g"], g_sharp), ("w", row["w"], sharp["w"]),
+                                  ("e", row["e"], sharp["e"])):
+            row[f"order_{name}"] = slope(row["eps"], [x - ref for x in values])
+        row["g_check"] = [c * (m - m0) ** 2 for m in row["da_diffuse"]]
+        out.append(row)
+    return out
+
+
+def ade_report(rows: list[dict]) -> list[str]:
+    if not rows:
+        return []
+    lines = ["", "## The ADE term as ε → 0 (axisymmetric FEM)", "",
+             f"At κ̄/κ = {ADE_KBAR}: each case seeded from its sharp membrane with ADE, run to a "
+             "steady state at every ε. Δa: the reduced area difference — the model's, from its "
+             "diffuse ΔA (what its ADE term G sees), and the φ = 0 surface's, ∮H dA/(4πR₀) — "
+             "against the sharp membrane's; g = G / W_sphere and w = W / W_sphere against the "
+             "sharp ones; p: the observed order (slope of log|error| over the three smallest "
+             "ε).", ""]
+    for r in rows:
+        lines += [f"**{r['branch']}** at v = {r['v']}, m₀ = {r['m0']}: sharp Δa = "
+                  f"{r['da_sharp']:.5f}, g = {r['g_sharp']:.5f}, w = {r['w_sharp']:.5f}", "",
+                  "| ε | Δa diffuse − sharp | Δa surface − sharp | g − g_sharp | "
+                  "w − w_sharp | label |", "|---|---|---|---|---|---|"]
+        for i, eps in enumerate(r["eps"]):
+            lines.append(f"| {eps:g} | {r['da_diffuse'][i] - r['da_sharp']:+.2e} | "
+                         f"{r['da_surface'][i] - r['da_sharp']:+.2e} | "
+                         f"{r['g'][i] - r['g_sharp']:+.2e} | {r['w'][i] - r['w_sharp']:+.2e} "
+                         f"| {r['labels'][i]} |")
+
+        def fmt(p):
+            return "—" if p is None else f"{p:.2f}"
+
+        lines += [f"| p | {fmt(r['order_da_diffuse'])} | {fmt(r['order_da_surface'])} | "
+                  f"{fmt(r['order_g'])} | {fmt(r['order_w'])} | |", ""]
+    return lines
+
+
+def run_transitions(cache: Cache, out: Path, plan) -> None:
+    """Stage ``transitions``: the seeded steady states around each transition."""
+    path = out / "sharp" / "runs.json"
+    runs = json.loads(path.read_text()) if path.is_file() else {}
+
+    def one(key, sharp, branch, eps, **ade):
+        if key in runs or sharp is None or "w" not in sharp:
+            return
+        row = phase_field(sharp, branch, eps, "axisymmetric", **ade)
+        row.pop("section")
+        row.update({k: v for k, v in ade.items() if k == "m0"})
+        print(f"  {key}: e = {row['e']:.6f}, {row['label']}"
+              f"{'' if row['kept_branch'] else ' LEFT the branch'}, {row['steps']} steps, "
+              f"{row['seconds']} s", flush=True)
+        runs[key] = row
+        write_json_atomic(path, runs, indent=None)
+
+    for eps in plan.transition_eps:
+        for upper, lower, vs in plan.minimal_transitions:
+            for v in vs:
+                for b in (upper, lower):
+                    one(_case_key("axisymmetric", b, v, eps), cache.get(b, v), b, eps)
+        if plan.pear_transition:
+            v, branches, m0s = plan.pear_transition
+            for m0 in m0s:
+                for b in branches:
+                    one(_ade_key(b, v, m0, eps), ade_sharp(cache, b, v, m0, ADE_KBAR), b, eps,
+                        kbar=ADE_KBAR, m0=m0)
+
+
+def _root(xs: list[float], ds: list[float]) -> float | None:
+    """The x where d changes sign between the points (quadratic through three, linear
+    through two), or None."""
+    pts = sorted(zip(xs, ds, strict=True))
+    if len(pts) < 2 or not any(a[1] * b[1] <= 0 for a, b in zip(pts, pts[1:], strict=False)):
+        return None
+    x, d = [p[0] for p in pts], [p[1] for p in pts]
+    if len(pts) >= 3:
+        roots = [r.real for r in np.roots(np.polyfit(x, d, 2)) if abs(r.imag) < 1e-12
+                 and x[0] <= r.real <= x[-1]]
+        if roots:
+            return float(min(roots, key=lambda r: abs(r - np.mean(x))))
+    for (x0, d0), (x1, d1) in zip(pts, pts[1:], strict=False):
+        if d0 * d1 <= 0:
+            return x0 - d0 * (x1 - x0) / (d1 - d0)
+    return None
+
+
+def transition_rows(cache: Cache, runs: dict, plan) -> list[dict]:
+    """Per transition: its location at each ε (where both branches were kept at ≥ 2 of the
+    points), the observed order and the extrapolation to ε → 0, beside the sharp one."""
+    out = []
+    def minimal_key(b, v):
+        return lambda eps: _case_key("axisymmetric", b, v, eps)
+
+    def ade_key(b, v, m):
+        return lambda eps: _ade_key(b, v, m, eps)
+
+    cases = [(f"{u} → {lo}", "v", [(v, minimal_key(u, v), minimal_key(lo, v)) for v in vs],
+              crossing(cache, u, lo, float(np.mean(vs)), compute=False).get("v"))
+             for u, lo, vs in plan.minimal_transitions]
+    if plan.pear_transition:
+        v, (u, lo), m0s = plan.pear_transition
+        es = {b: [(ade_sharp(cache, b, v, m, ADE_KBAR, compute=False) or {}).get("e")
+                  for m in m0s] for b in (u, lo)}
+        sharp_x = None
+        if all(e is not None for b in es for e in es[b]):
+            sharp_x = _root(list(m0s), [a - b for a, b in zip(es[u], es[lo], strict=True)])
+        cases.append((f"{u} → {lo} (v = {v}, κ̄/κ = {ADE_KBAR})", "m0",
+                      [(m, ade_key(u, v, m), ade_key(lo, v, m)) for m in m0s],
+                      sharp_x))
+    for name, along, points, sharp_x in cases:
+        at = {}
+        for eps in plan.transition_eps:
+            xs, ds = [], []
+            for x, ku, kl in points:
+                ru, rl = runs.get(ku(eps)), runs.get(kl(eps))
+                if ru and rl and ru["kept_branch"] and rl["kept_branch"]:
+                    xs.append(x)
+                    ds.append(ru["e"] - rl["e"])
+            at[eps] = _root(xs, ds)
+        have = [(e, x) for e, x in at.items() if x is not None]
+        row = {"transition": name, "along": along, "sharp": sharp_x,
+               "at": {f"{e:g}": x for e, x in at.items()}, "extrapolated": None,
+               "order": None}
+        if len(have) >= 2:
+            x0, p, observed = extrapolate([e for e, _ in have], [x for _, x in have])
+            row.update(extrapolated=x0, order=p, order_observed=observed)
+        out.append(row)
+    return out
+
+
+def transitions_report(rows: list[dict], plan) -> list[str]:
+    if not rows:
+        return []
+    lines = ["", "## Where the lowest branch changes, from the phase field (axisymmetric FEM)",
+             "", "Seeded steady states at three points around each sharp transition; at each "
+             "ε the root of the difference of the two branches' e (a quadratic through the "
+             "points where both kept their branch), then the observed order and Richardson "
+             "over the smallest ε. — : a branch left (opened, pinched or budded) at too many "
+             "of the points.", "",
+             "| transition | along | " + " | ".join(f"ε = {e:g}" for e in plan.transition_eps)
+             + " | p | ε → 0 | sharp |", "|---|---|" + "---|" * (len(plan.transition_eps) + 3)]
+    for r in rows:
+        cells = ["—" if r["at"][f"{e:g}"] is None else f"{r['at'][f'{e:g}']:.4f}"
+                 for e in plan.transition_eps]
+        ex = "—" if r["extrapolated"] is None else f"{r['extrapolated']:.4f}"
+        p = "—" if r["order"] is None else (f"{r['order']:.2f}"
+                                            + ("" if r.get("order_observed") else " (assumed)"))
+        sh = "—" if r["sharp"] is None else f"{r['sharp']:.4f}"
+        lines.append(f"| {r['transition']} | {r['along']} | " + " | ".join(cells)
+                     + f" | {p} | {ex} | {sh} |")
+    return lines
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT,
@@ -557,11 +860,12 @@ def main(argv=None) -> dict:
     ap.add_argument("--report-only", action="store_true")
     ap.add_argument("--quick", action="store_true",
                     help="prolate and oblate at v = 0.8, ε = 0.08 … 0.05 (seconds)")
-    ap.add_argument("--stages", nargs="+", choices=("branches", "eps"),
-                    default=["branches", "eps"])
-    ap.add_argument("--backends", nargs="+", choices=("spectral", "fem"),
-                    default=["spectral", "fem"],
-                    help="the FEM runs the plan's fem_cases only, without the finest ε")
+    ap.add_argument("--stages", nargs="+", choices=("branches", "eps", "ade", "transitions"),
+                    default=["branches", "eps", "ade", "transitions"])
+    ap.add_argument("--backends", nargs="+", choices=("spectral", "fem", "axisymmetric"),
+                    default=["spectral", "fem", "axisymmetric"],
+                    help="the FEM runs the plan's fem_cases only, without the finest ε; the "
+                    "axisymmetric FEM every case at ε = 0.04 … 0.0025, twice (its check)")
     ap.add_argument("--cases", nargs="+", default=None, metavar="BRANCH[@V]",
                     help="only these branches or cases, e.g. torus prolate@0.8000 (stage eps)")
     ap.add_argument("--fine", nargs="*", default=None, metavar="BRANCH@V",
@@ -586,10 +890,22 @@ def main(argv=None) -> dict:
         for backend in args.backends:
             if backend == "spectral":
                 run_eps(cache, args.out, backend, plan, args.cases, fine)
+            elif backend == "axisymmetric":
+                for b in ("axisymmetric", "axisymmetric-check"):
+                    run_eps(cache, args.out, b, plan, args.cases, ())
             else:
                 only = set(plan.fem_cases) & set(args.cases or plan.fem_cases)
                 if only:
                     run_eps(cache, args.out, backend, plan, only, ())
+    if not args.report_only and "ade" in args.stages:
+        run_ade(cache, args.out, plan)
+    if not args.report_only and "transitions" in args.stages:
+        if plan.pear_transition:  # the sharp ones first (the report reads them)
+            v, branches, m0s = plan.pear_transition
+            for m0 in m0s:
+                for b in branches:
+                    ade_sharp(cache, b, v, m0, ADE_KBAR)
+        run_transitions(cache, args.out, plan)
     payload = report(cache, args.out, plan)
     print(f"wrote {args.out / 'sharp_limit.md'}")
     return payload

@@ -8,6 +8,7 @@ study without a check fails here.
 from __future__ import annotations
 
 import importlib.util
+import json
 import math
 from pathlib import Path
 
@@ -209,15 +210,34 @@ def check_regenerate(result, out):
 
 def check_sharp_limit(result, out):
     """The sharp prolate and oblate at v = 0.8 as the reference gives them (to 1e-8); the
-    seeded phase-field prolate's energy above the sharp one and falling as ε falls."""
+    seeded phase-field prolate's energy above the sharp one and falling as ε falls
+    (spectral); the axisymmetric column at the same ε, its two resolutions within 1e-3."""
     w = {r["branch"]: r["w"] for r in result["branches"]}
     assert abs(w["prolate"] - 1.387440432444) < 1e-8 and abs(w["oblate"] - 1.452538628565) < 1e-8
-    (row,) = result["rows"]
+    rows = {r["backend"]: r for r in result["rows"]}
+    assert set(rows) == {"spectral", "axisymmetric"}
+    axi = rows["axisymmetric"]
+    assert axi["eps"] == [0.08, 0.064, 0.05] and all(e > axi["e_sharp"]
+                                                     for e in axi["e_phase_field"])
+    assert axi["disc_over_eps_effect"] is None or axi["disc_over_eps_effect"] < 1e-3
+    row = rows["spectral"]
     e = row["e_phase_field"]
     assert row["branch"] == "prolate" and len(e) == 3 and row["eps"] == [0.08, 0.064, 0.05]
     assert all(a > b > row["e_sharp"] for a, b in zip(e, e[1:], strict=False)), e
     assert e[-1] < 1.5 * row["e_sharp"], e
     assert (out / "sharp_limit.md").is_file() and (out / "sharp-eps.png").is_file()
+
+
+def check_axisymmetric(result, out):
+    """The resolution table (order 4 at ε = 0.05: more nodes, a smaller error), the cost
+    table of the three methods, and the axisymmetric block of bench.json."""
+    errs = {r["nodes_per_eps"]: r["error"] for r in result["resolution"]}
+    assert set(errs) == {1.5, 2.5} and errs[2.5] < errs[1.5] < 0.05
+    cost = result["cost"]
+    assert set(cost["runs"]) == {"axisymmetric FEM (p = 8)", "3D FEM (p = 8)", "3D spectral"}
+    assert all(p["error"] < 0.05 for pts in cost["runs"].values() for p in pts)
+    assert "axisymmetric" in json.loads((out / "bench.json").read_text())
+    assert (out / "axisymmetric.md").is_file() and (out / "axisymmetric-cost.png").is_file()
 
 
 def check_ade_plane(result, out):

@@ -172,3 +172,23 @@ def test_slurm_config(tmp_path, monkeypatch):
                  "source .venv/bin/activate", "FEM_ADE_FFT_WORKERS=1", "--nthreads 1",
                  "--nworkers 2", "distributed.cli.dask_worker"):
         assert line in script, line
+
+
+def test_sweep_point_in_the_axisymmetric_geometry(tmp_path):
+    """``geometry = "axisymmetric"`` in [run] runs a point on the FEM's (r, z) half-plane
+    (docs/model.md §11): its run folder says so, its row has the end state."""
+    from fem_ade.sweep import run_point
+
+    text = SWEEP.format(axes="[0.9]", steps=30).replace('backend = "spectral"\nn = 16',
+                                                       'backend = "fem"\ngeometry = '
+                                                       '"axisymmetric"')
+    path = tmp_path / "axi.toml"
+    path.write_text(text)
+    (point,) = load_sweep(path).points()
+    assert point.options(point.scene())["backend_options"] == {"geometry": "axisymmetric"}
+    r = run_point(point, str(tmp_path / "out"))
+    assert r["status"] == "max_steps" and r["components"] == 1 and r["label"] == "sphere"
+    import json
+
+    info = json.loads((tmp_path / "out" / "points" / point.name / "summary.json").read_text())
+    assert info["backend_info"]["geometry"] == "axisymmetric"

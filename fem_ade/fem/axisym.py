@@ -342,8 +342,8 @@ class AxisymmetricFEMBackend(FEMBackend):
         parse_mesh(mesh)
         R, z0, z1 = parse_domain(domain, scene.params.L)
         L = scene.params.L
-        if R < 4 * L / n or z1 - z0 < 4 * L / n:
-            raise ModelError(f"--domain {R:g},{z0:g},{z1:g} is less than 4 cells of L/n = "
+        if R < 2 * L / n or z1 - z0 < 2 * L / n:
+            raise ModelError(f"--domain {R:g},{z0:g},{z1:g} is less than 2 cells of L/n = "
                              f"{L / n:.3g} across")
         return L / (n * order)
 
