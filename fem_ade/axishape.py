@@ -362,7 +362,7 @@ def describe_meridians(M: Meridians, *, V=None, A=None, dA=None, D=None) -> dict
     return d
 
 
-def describe_axisymmetric(be, final: dict):
+def describe_axisymmetric(be, final: dict, grid=None):
     """(shape, (φ revolved on the box's grid, the meridians, the descriptors)) of an
     axisymmetric backend's final state: what :func:`fem_ade.runs.describe_final` gives for
     a 3D run, from the (r, z) field (module docstring)."""
@@ -379,7 +379,7 @@ def describe_axisymmetric(be, final: dict):
     shape["sharp"] = d["sharp"]
     shape["geometry"] = "axisymmetric"
     shape["fine_zone"] = be.fine_zone_report()["inside"]
-    return shape, (be.grid_phi(), M, d)
+    return shape, (be.grid_phi() if grid is None else grid, M, d)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -196,15 +196,16 @@ class BackendBase:
         m = float(np.max(np.abs(self.phi)))
         return m if math.isfinite(m) else math.nan
 
-    def describe_final(self, final: dict):
+    def describe_final(self, final: dict, grid: np.ndarray | None = None):
         """(shape descriptors of the φ = 0 surface or None, (φ on the uniform grid, the
         surface, the full descriptors)): 3D runs with a finite field (:mod:`fem_ade.shape`;
         the axisymmetric FEM: :mod:`fem_ade.axishape`). ``final``: the diagnostics, whose
-        diffuse V, A, ΔA the reduced values use."""
+        diffuse V, A, ΔA the reduced values use; ``grid``: :meth:`grid_phi` if the caller
+        has it."""
         from .shape import SHAPE_KEYS, describe, extract_surface
 
         p = self.scene.params
-        grid = np.asarray(self.grid_phi())
+        grid = np.asarray(self.grid_phi() if grid is None else grid)
         if self.scene.dim != 3 or not np.all(np.isfinite(grid)):
             return None, (grid, None, None)
         surface = extract_surface(grid, p.L)

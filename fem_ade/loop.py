@@ -134,6 +134,8 @@ class RunResult:
     cpu_s: float = 0.0
     #: the backend's set-up CPU time (set by fem_ade.runs)
     setup_cpu_s: float = 0.0
+    #: why the shape analysis after the run failed (None: it did not; fem_ade.runs)
+    analysis_error: str | None = None
 
     @property
     def exit_code(self) -> int:

@@ -7,6 +7,7 @@ writers here.
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import math
 import os
@@ -290,6 +291,19 @@ def truncate_csv(path: str | Path, last_step: int) -> list[dict[str, str]]:
         csv.writer(f).writerows(keep)
     os.replace(tmp, path)
     return [dict(zip(rows[0], r, strict=True)) for r in keep[1:]]
+
+
+def history_digest(path: str | Path, last_step: int) -> str:
+    """SHA-256 of a per-step CSV file's header and whole rows up to ``last_step`` (what a
+    checkpoint at that step was written after, and what a resume keeps)."""
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows:
+        return hashlib.sha256(b"").hexdigest()
+    width = len(rows[0])
+    keep = rows[:1] + [r for r in rows[1:] if (k := _step_of(r, width)) is not None
+                       and k <= last_step]
+    return hashlib.sha256("\n".join(",".join(r) for r in keep).encode()).hexdigest()
 
 
 def truncate_history(path: str | Path, last_step: int) -> list[dict]:

@@ -337,28 +337,37 @@ def render_meridians(M, path: str | Path, *, title: str = "", subtitle: str = ""
                   fontsize=11)
 
     ax = fig.add_subplot(gs[1])
-    r, z, phi = M.r, M.z, M.phi
-    xs = np.concatenate([-r[:0:-1], r])
-    sec = np.concatenate([phi[:0:-1], phi], axis=0)
-    vmax = max(1.0, float(np.max(np.abs(sec))))
-    pcm = ax.pcolormesh(xs, z, sec.T, shading="gouraud", cmap="RdBu_r", vmin=-vmax,
-                        vmax=vmax, rasterized=True)
+    R, z0, z1 = M.domain
+    xlim, ylim = (-R, R), (z0, z1)
+    if M.curves:  # the membrane with a margin, in the domain
+        P = np.vstack(M.curves)
+        half = 1.25 * max(P[:, 0].max(), 0.5 * np.ptp(P[:, 1]), 1e-9)
+        mid = 0.5 * (P[:, 1].min() + P[:, 1].max())
+        xlim = (-min(half, R), min(half, R))
+        ylim = (max(z0, mid - half), min(z1, mid + half))
+    # φ on a uniform display grid of the window (linear in the fine contour grid's cells):
+    # a picture needs no more pixels than it shows
+    from scipy.interpolate import RegularGridInterpolator
+
+    nx = 480
+    ny = max(2, int(round(nx * (ylim[1] - ylim[0]) / (xlim[1] - xlim[0]))))
+    gx, gy = np.linspace(*xlim, nx), np.linspace(*ylim, ny)
+    X, Y = np.meshgrid(np.minimum(np.abs(gx), M.r[-1]), gy, indexing="xy")
+    sec = RegularGridInterpolator((M.r, M.z), M.phi)(np.stack([X, Y], axis=-1))
+    vmax = max(1.0, float(np.max(np.abs(M.phi))))
+    pcm = ax.imshow(sec, origin="lower", extent=(*xlim, *ylim), cmap="RdBu_r", vmin=-vmax,
+                    vmax=vmax, interpolation="bilinear", aspect="equal")
     for pts in M.curves:
         for sign in (1.0, -1.0):
             ax.plot(sign * pts[:, 0], pts[:, 1], color="k", lw=1.6)
-    R, z0, z1 = M.domain
     if M.fine is not None:
         (ra, rb), (za, zb) = M.fine
         for sign in (1.0, -1.0):
             ax.plot(sign * np.array([ra, rb, rb, ra]), [za, za, zb, zb], color="#555555",
                     lw=0.9, ls="--")
     ax.axvline(0.0, color="#444444", lw=0.8, ls="-.")
-    if M.curves:  # the membrane with a margin, in the domain
-        P = np.vstack(M.curves)
-        half = 1.25 * max(P[:, 0].max(), 0.5 * np.ptp(P[:, 1]), 1e-9)
-        mid = 0.5 * (P[:, 1].min() + P[:, 1].max())
-        ax.set_xlim(-min(half, R), min(half, R))
-        ax.set_ylim(max(z0, mid - half), min(z1, mid + half))
+    ax.set_xlim(*xlim)
+    ax.set_ylim(*ylim)
     ax.set_aspect("equal")
     ax.set_xlabel("r (mirrored: −r on the left)")
     ax.set_ylabel("z")

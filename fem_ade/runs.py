@@ -33,6 +33,7 @@ from .output import (
     HistoryWriter,
     check_history,
     check_out_dir,
+    history_digest,
     package_versions,
     prepare_out_dir,
     read_json,
@@ -273,8 +274,9 @@ def resume(out: str | Path, *, steps: int | None = None, quiet: bool = True,
     from .lock import FolderLock
 
     out = Path(out)
-    if not (out / "run.json").is_file() or not (out / "checkpoint.npz").is_file():
-        raise ModelError(f"cannot resume {out}: it has no run.json and checkpoint.npz "
+    missing = [name for name in ("run.json", "checkpoint.npz") if not (out / name).is_file()]
+    if missing:
+        raise ModelError(f"cannot resume {out}: it has no {' and no '.join(missing)} "
                          "(run with --checkpoint-every K, or interrupt with Ctrl-C)")
     lock = FolderLock(out).acquire()
     try:
@@ -311,11 +313,17 @@ def _check_resumable(out: Path, steps: int | None):
             config = config.continued_to(steps)
     except (ModelError, TypeError, ValueError) as err:
         raise ModelError(f"cannot resume {out}: run.json: {err}") from None
-    state, ls, identity = read_checkpoint(out)
-    if identity != run_identity(scene, config):
-        raise ModelError(f"cannot resume {out}: its checkpoint.npz belongs to another run "
-                         f"({_identity_text(identity)}; run.json says "
-                         f"{_identity_text(run_identity(scene, config))})")
+    state, ls, identity, digests = read_checkpoint(out)
+    if identity is None or "config" not in identity or digests is None:
+        raise ModelError(f"cannot resume {out}: its checkpoint.npz carries no checksums (an "
+                         "older fem_ade wrote it): start the run again")
+    difference = _identity_difference(identity, run_identity(scene, config))
+    if difference:
+        raise ModelError(f"cannot resume {out}: its checkpoint.npz belongs to another run than "
+                         f"run.json's ({difference}); a resume continues that very run")
+    if digests.get("state") != state_digest(state, ls):
+        raise ModelError(f"cannot resume {out}: the checkpoint's state does not match its "
+                         "checksum (changed after it was written)")
     if not (isinstance(ls.k, int) and ls.k >= 0):
         raise ModelError(f"cannot resume {out}: the checkpoint's step is {ls.k!r}, not an "
                          "integer >= 0")
@@ -325,26 +333,59 @@ def _check_resumable(out: Path, steps: int | None):
     if config.total_steps < ls.k:
         raise ModelError(f"the checkpoint is at step {ls.k}, past --steps {config.total_steps}")
     check_history(out / "history.csv", ls.k)
+    if digests.get("history") != history_digest(out / "history.csv", ls.k):
+        raise ModelError(f"cannot resume {out}: history.csv up to step {ls.k} is not the one "
+                         "its checkpoint was written after (rows changed, missing or added)")
     return scene, config, state, ls
 
 
+#: the run.json fields a resume may change: how far it goes, how often it writes a
+#: checkpoint, whether it draws — none changes the trajectory or a file already written
+RESUMABLE_CHANGES = ("steps", "max_steps", "checkpoint_every", "render")
+
+
 def run_identity(scene: Scene, config: RunConfig) -> dict:
-    """What a checkpoint must match to be resumed: scene, backend, resolution, options,
-    scheme, constraints and a hash of the parameters."""
+    """What a checkpoint must match to be resumed: the scene as run and every field of the
+    configuration but :data:`RESUMABLE_CHANGES` (as JSON would store them)."""
+    config_map = {k: v for k, v in config.to_mapping().items() if k not in RESUMABLE_CHANGES}
+    return json.loads(json.dumps({"scene": scene_to_mapping(scene), "config": config_map},
+                                 sort_keys=True, default=str))
+
+
+def _identity_difference(stored: dict, current: dict, where: str = "") -> str | None:
+    """The first field where two identities differ, as 'FIELD: A in the checkpoint, B in
+    run.json', or None."""
+    if isinstance(stored, dict) and isinstance(current, dict):
+        for key in sorted(set(stored) | set(current)):
+            d = _identity_difference(stored.get(key), current.get(key),
+                                     f"{where}.{key}" if where else key)
+            if d:
+                return d
+        return None
+    if stored != current:
+        name = where.replace("config.", "", 1)
+
+        def short(x):
+            text = json.dumps(x, default=str)
+            return text if len(text) <= 60 else text[:57] + "..."
+
+        return f"{name}: {short(stored)} in the checkpoint, {short(current)} in run.json"
+    return None
+
+
+def state_digest(state: dict, ls: LoopState) -> str:
+    """SHA-256 of a checkpoint's backend state (names, dtypes, shapes, bytes), its loop state
+    and the momentum anchor: a resume refuses a checkpoint changed after it was written."""
     import hashlib
 
-    params = json.dumps(scene.params.as_dict(), sort_keys=True, default=str)
-    return {"scene": scene.name, "backend": config.backend, "n": config.n,
-            "options": config.backend_options, "scheme": config.scheme,
-            "constraints": config.constraints,
-            "params": hashlib.sha256(params.encode()).hexdigest()[:16]}
-
-
-def _identity_text(identity: dict | None) -> str:
-    if not identity:
-        return "no identity"
-    return (f"scene {identity['scene']}, {identity['backend']} n = {identity['n']}, "
-            f"{identity['scheme']}, {identity['constraints']}")
+    h = hashlib.sha256()
+    for prefix, arrays in (("state", state), ("anchor", ls.anchor or {})):
+        for name in sorted(arrays):
+            a = np.ascontiguousarray(arrays[name])
+            h.update(f"{prefix}/{name}/{a.dtype.str}/{a.shape};".encode())
+            h.update(a.tobytes())
+    h.update(json.dumps(ls.to_json(), sort_keys=True, default=str).encode())
+    return h.hexdigest()
 
 
 # ---------------------------------------------------------------------------------------
@@ -352,16 +393,20 @@ def _identity_text(identity: dict | None) -> str:
 # ---------------------------------------------------------------------------------------
 def write_checkpoint(out: Path, backend: Backend, ls: LoopState, identity: dict) -> None:
     """OUT/checkpoint.npz: the backend's state and the loop's (with momentum, its previous
-    iterate) and whose run it is, atomically."""
-    arrays = {f"state__{k}": v for k, v in backend.state().items()}
+    iterate), whose run it is, and the checksums of the state and of history.csv up to its
+    step (a resume checks both), atomically."""
+    state = backend.state()
+    arrays = {f"state__{k}": v for k, v in state.items()}
     arrays.update({f"anchor__{k}": v for k, v in (ls.anchor or {}).items()})
+    digests = {"state": state_digest(state, ls),
+               "history": history_digest(out / "history.csv", ls.k)}
     write_fields(out / "checkpoint.npz", arrays, loop=json.dumps(ls.to_json()),
-                 identity=json.dumps(identity))
+                 identity=json.dumps(identity), digests=json.dumps(digests))
 
 
-def read_checkpoint(out: Path) -> tuple[dict, LoopState, dict | None]:
-    """(backend state, loop state, identity) of OUT/checkpoint.npz; ModelError if it is
-    unreadable, incomplete or not finite."""
+def read_checkpoint(out: Path) -> tuple[dict, LoopState, dict | None, dict | None]:
+    """(backend state, loop state, identity, checksums) of OUT/checkpoint.npz; ModelError if
+    it is unreadable, incomplete or not finite."""
     path = out / "checkpoint.npz"
     try:
         with np.load(path) as z:
@@ -372,6 +417,7 @@ def read_checkpoint(out: Path) -> tuple[dict, LoopState, dict | None]:
             state, anchor = part("state__"), part("anchor__")
             ls = LoopState(**json.loads(str(z["loop"])), anchor=anchor or None)
             identity = json.loads(str(z["identity"])) if "identity" in z.files else None
+            digests = json.loads(str(z["digests"])) if "digests" in z.files else None
     except Exception as err:  # noqa: BLE001 (numpy raises many kinds for a broken file)
         raise ModelError(f"cannot resume {out}: checkpoint.npz is unreadable or incomplete "
                          f"({type(err).__name__}: {err})") from None
@@ -380,7 +426,7 @@ def read_checkpoint(out: Path) -> tuple[dict, LoopState, dict | None]:
     for name, value in {**state, **anchor}.items():
         if np.issubdtype(value.dtype, np.number) and not np.all(np.isfinite(value)):
             raise ModelError(f"cannot resume {out}: the checkpoint's {name} is not finite")
-    return state, ls, identity
+    return state, ls, identity, digests
 
 
 class _Series:
@@ -529,7 +575,7 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
         # the ParaView series: the start, every save_every steps, the end
         series = _Series(out / "phi.xdmf", be, config.save_every,
                          None if start is None else start_ls.k)
-    identity = run_identity(scene, config)
+    identity = run_identity(scene, config) if out is not None else None
     observers = [(config.save_every, series.save)] if series else []
     shapes = None
     if config.shape_every:
@@ -555,16 +601,29 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
             shapes.close()
     result.shapes = shapes.rows if shapes is not None else []
     result.setup_cpu_s = getattr(be, "setup_cpu_s", 0.0) if start is None else 0.0
-    result.shape, grid = describe_final(be, result.final)
-    if result.shape is not None and result.status != "diverged":
-        from .sharp import compare
+    phi_grid = np.asarray(be.grid_phi())
+    result.final_grid = phi_grid
+    rows = earlier + result.history
+    if out is not None:  # what was computed is written first, before any analysis
+        with critical():  # a signal now waits for the run's files
+            summary = _write_results(out, be, result, config, series, phi_grid)
+    grid = (phi_grid, None, None)
+    try:
+        result.shape, grid = be.describe_final(result.final, grid=phi_grid)
+        if result.shape is not None and result.status != "diverged":
+            from .sharp import compare
 
-        result.shape["sharp_reference"] = compare(be.scene.params, result.shape, result.final,
-                                                  points=be.resolution_per_length())
-    result.final_grid = grid[0]
+            result.shape["sharp_reference"] = compare(be.scene.params, result.shape,
+                                                      result.final,
+                                                      points=be.resolution_per_length())
+    except Exception as err:  # noqa: BLE001 (the analysis must never cost the results)
+        result.shape = None
+        result.analysis_error = f"{type(err).__name__}: {err}"[:500]
+        warnings.warn(f"the shape analysis failed ({result.analysis_error}); the run's "
+                      "results are saved", stacklevel=2)
     if out is not None:
-        with critical():  # a signal now waits for the run's last files
-            _finish(out, be, result, config, series, grid, earlier + result.history)
+        with critical():
+            _finish(out, be, result, config, summary, grid, rows)
     return result
 
 
@@ -574,10 +633,11 @@ def describe_final(be: Backend, final: dict):
     return be.describe_final(final)
 
 
-def _finish(out: Path, be: Backend, result: RunResult, config: RunConfig, series, grid,
-            rows: list[dict]) -> None:
-    """final.npz, the end of the series, summary.json and the pictures."""
-    phi_grid, surface, descriptors = grid
+def _write_results(out: Path, be: Backend, result: RunResult, config: RunConfig, series,
+                   phi_grid: np.ndarray) -> dict:
+    """What the run computed, before any analysis: final.npz, the end of the series and
+    summary.json (its shape, verdict and sharp comparison still None, ``analysis``
+    "pending"); returns the summary."""
     fields = be.fields()
     if np.shape(fields["phi"]) != phi_grid.shape:  # the field is not on the uniform grid
         fields["phi_grid"] = phi_grid
@@ -605,16 +665,30 @@ def _finish(out: Path, be: Backend, result: RunResult, config: RunConfig, series
         "status": result.status,
         "message": result.message,
         "final": result.final,
-        "shape": result.shape,
-        "verdict": verdict(be.scene, result.shape),
-        "sharp_reference": (result.shape or {}).get("sharp_reference"),
+        "shape": None,
+        "verdict": None,
+        "sharp_reference": None,
+        "analysis": "pending",
         "wall_s": result.wall_s,
         "cpu_s": result.cpu_s,
         "setup_cpu_s": getattr(be, "setup_cpu_s", None),
         "versions": package_versions(),
     }
     write_json_atomic(out / "summary.json", summary)
-    if config.render and np.all(np.isfinite(phi_grid)) and rows:
+    return summary
+
+
+def _finish(out: Path, be: Backend, result: RunResult, config: RunConfig, summary: dict,
+            grid, rows: list[dict]) -> None:
+    """summary.json with the analysis (shape, verdict, sharp comparison, or why it failed)
+    and the pictures."""
+    phi_grid, surface, descriptors = grid
+    error = getattr(result, "analysis_error", None)
+    summary.update(shape=result.shape, verdict=verdict(be.scene, result.shape),
+                   sharp_reference=(result.shape or {}).get("sharp_reference"),
+                   analysis="failed: " + error if error else "done")
+    write_json_atomic(out / "summary.json", summary)
+    if config.render and np.all(np.isfinite(phi_grid)) and rows and not error:
         from .render import draw_run, run_label
 
         columns = {c: np.array([float(r.get(c, 0.0)) for r in rows]) for c in rows[0]}

@@ -210,6 +210,9 @@ def test_scenes_it_takes_and_refuses():
     with pytest.raises(ModelError, match="not a surface of revolution"):  # seeded: arms
         make_backend("fem", get_scene("three-arm"), n=16, dt=1e-7, ic="seeded",
                      geometry="axisymmetric")
+    with pytest.raises(ModelError, match="reaches the edge"):  # the domain cuts the membrane
+        make_backend("fem", get_scene("sphere"), n=16, dt=1e-6, geometry="axisymmetric",
+                     domain="0.2,0,1")
     for bad, match in (({"domain": "1,2"}, "three numbers"), ({"domain": "-1,0,1"}, "R > 0"),
                        ({"mesh": "graded:x"}, "margin"), ({"mesh": "foo.msh"}, "uniform or"),
                        ({"solver": "fft"}, "fdm"), ({"linalg": "petsc"}, "one process")):

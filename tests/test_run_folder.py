@@ -261,6 +261,34 @@ def test_signal_in_the_final_write_waits_for_it(tmp_path, monkeypatch):
     assert np.load(out / "final.npz")["phi"].size > 0
 
 
+def test_results_are_written_before_the_analysis(tmp_path, monkeypatch, capsys):
+    """What the run computed (final.npz, summary.json with its final diagnostics) is written
+    before the shape analysis, the sharp comparison and the pictures; a failure there (a
+    MemoryError while VTK is imported, say) is reported and leaves them: exit 0, summary's
+    ``analysis`` says why."""
+    from fem_ade.backend import BackendBase
+    from fem_ade.run import main
+
+    seen = {}
+
+    def fails(self, final, grid=None):
+        seen["files"] = sorted(p.name for p in out.iterdir())
+        seen["summary"] = json.loads((out / "summary.json").read_text())
+        raise MemoryError("no memory for VTK")
+
+    monkeypatch.setattr(BackendBase, "describe_final", fails)
+    monkeypatch.setattr(signal, "signal", lambda *a: None)
+    out = tmp_path / "R"
+    with pytest.warns(UserWarning, match="shape analysis failed"):
+        code = main([*SHORT, "--steps", "4", "--out", str(out)])
+    assert code == 0
+    assert {"final.npz", "summary.json", "history.csv"} <= set(seen["files"])
+    assert seen["summary"]["analysis"] == "pending" and seen["summary"]["final"]["E"] > 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["analysis"].startswith("failed: MemoryError") and s["shape"] is None
+    assert s["final"] == seen["summary"]["final"] and np.load(out / "final.npz")["phi"].size
+
+
 # --- resources ------------------------------------------------------------------------------
 def test_disk_full_mid_run_keeps_the_last_checkpoint(tmp_path, monkeypatch, capsys):
     """ENOSPC while the history is written after step 30 (a checkpoint at 20): one line,

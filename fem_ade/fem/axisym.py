@@ -53,6 +53,9 @@ GROWTH, MAX_COARSE = 1.3, 12.0
 #: |φ| below this marks the membrane's band (the initial one: the fine zone; the final one:
 #: whether it stayed there)
 BAND = 0.999
+#: |φ| below this is the membrane proper: an initial membrane that reaches the domain's edge
+#: is refused (the natural edge would mirror it)
+CUT = 0.9
 #: φ on the revolved uniform grid (``grid_phi``, final.npz's phi_grid) at most this many
 #: points per axis
 GRID_LIMIT = 128
@@ -224,10 +227,10 @@ def make_mesh(kind: str, margin, n: int, L: float, domain, band=None) -> RZMesh:
     return RZMesh("graded", r, z, (fine_r, fine_z), h, L, margin)
 
 
-def membrane_band(phi: np.ndarray, r: np.ndarray, z: np.ndarray):
-    """((r_a, r_b), (z_a, z_b)): the box of the nodes of the (r, z) grid where |φ| < BAND, or
-    None where there are none."""
-    where = np.abs(phi) < BAND
+def membrane_band(phi: np.ndarray, r: np.ndarray, z: np.ndarray, level: float = BAND):
+    """((r_a, r_b), (z_a, z_b)): the box of the nodes of the (r, z) grid where |φ| < level,
+    or None where there are none."""
+    where = np.abs(phi) < level
     if not where.any():
         return None
     ri, zi = np.nonzero(where)
@@ -349,11 +352,9 @@ class AxisymmetricFEMBackend(FEMBackend):
 
     # -- geometry ------------------------------------------------------------------------------
     def _make_mesh(self, n: int, mesh):
-        p = self.params
-        band = None
-        if self.mesh_kind == "graded":
-            band = self._initial_band()
-        return make_mesh(self.mesh_kind, self.margin, n, p.L, self.domain, band)
+        band = self._initial_band()  # also checks that the membrane is inside the domain
+        return make_mesh(self.mesh_kind, self.margin, n, self.params.L, self.domain,
+                         band if self.mesh_kind == "graded" else None)
 
     def _space(self):
         p = self.order
@@ -387,9 +388,15 @@ class AxisymmetricFEMBackend(FEMBackend):
         ic, perturb, seed = self._ic
         phi = self.initial_field(np.stack([rr, zz]), ic=ic, perturb=perturb, seed=seed)
         band = membrane_band(phi, r, z)
+        where = f"the domain r <= {R:g}, {z0:g} <= z <= {z1:g}"
         if band is None:
             raise ModelError(f"scene {self.scene.name}: the initial field has no membrane in "
-                             f"the domain r <= {R:g}, {z0:g} <= z <= {z1:g}")
+                             f"{where}")
+        (_, rb), (za, zb) = membrane_band(phi, r, z, level=CUT)
+        if rb >= r[-1] or za <= z[0] or zb >= z[-1]:
+            raise ModelError(f"scene {self.scene.name}: the initial membrane reaches the edge "
+                             f"of {where} (its natural edges would mirror it): give a larger "
+                             "--domain R,z0,z1")
         return band
 
     # -- output --------------------------------------------------------------------------------
@@ -448,11 +455,11 @@ class AxisymmetricFEMBackend(FEMBackend):
                   band[1][0] >= za - tol and band[1][1] <= zb + tol)
         return {"inside": bool(inside), "band": band}
 
-    def describe_final(self, final: dict):
+    def describe_final(self, final: dict, grid: np.ndarray | None = None):
         """The shape of the final φ = 0 meridians (:mod:`fem_ade.axishape`)."""
         from ..axishape import describe_axisymmetric
 
-        return describe_axisymmetric(self, final)
+        return describe_axisymmetric(self, final, grid)
 
     def resolution_per_length(self) -> float:
         """Nodes per L at the finest spacing (p·n): the in-run sharp comparison's test."""
