@@ -22,6 +22,11 @@ SQRT2 = math.sqrt(2.0)
 AREA_FACTOR = 3.0 * SQRT2 / 4.0
 
 
+#: the version of the discrete physics (the model's functionals, schemes and their
+#: discretizations): a sweep reuses a point's run only if it was made with the same
+PHYSICS_VERSION = "2026.12-1"
+
+
 class ModelError(ValueError):
     """Invalid model input: a parameter, a scene or a scene file. The message is one line."""
 

@@ -46,6 +46,7 @@ import csv
 import itertools
 import json
 import os
+import re
 import signal
 import sys
 import time
@@ -90,6 +91,17 @@ class Point:
             return vesicle_scene(**self.fixed, **self.values, branch=self.seed)
         return resolve_scene(self.base).with_(**self.fixed, **self.values)
 
+    def identity(self) -> dict:
+        """What this point is: its base, fixed and swept parameters, seed, run options and
+        the version of the model's discrete physics (a run folder is reused only for the
+        same; the resolved scene and configuration follow from them)."""
+        from .model import PHYSICS_VERSION
+
+        return json.loads(json.dumps({"base": self.base, "fixed": self.fixed,
+                                      "values": self.values, "seed": self.seed,
+                                      "run": self.run, "physics": PHYSICS_VERSION},
+                                     sort_keys=True, default=str))
+
     def options(self, scene) -> dict:
         from .runs import recipe
 
@@ -132,7 +144,11 @@ class Sweep:
 
 
 def _fmt(value) -> str:
-    return f"{value:g}" if isinstance(value, float) else str(value)
+    """A value in a point's name: a float's shortest round-trip form (0.9 and 0.9000001 are
+    two names), anything else as text."""
+    if isinstance(value, float):
+        return repr(value) if not value.is_integer() else f"{value:g}"
+    return str(value)
 
 
 def load_sweep(path: str | Path) -> Sweep:
@@ -169,9 +185,21 @@ def load_sweep(path: str | Path) -> Sweep:
             axes[key] = spec
         else:
             raise ModelError(f"axes.{key} must be a non-empty list or {{start, stop, num}}")
+    for key, values in axes.items():
+        for value in values:
+            if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+                raise ModelError(f"axes.{key}: {value!r} is not a number or a name")
+        if len(set(map(_fmt, values))) != len(values):
+            raise ModelError(f"axes.{key} lists a value twice: {values}")
     seeds = data.get("seeds", ["prolate"] if base == "vesicle" else [0])
     if not isinstance(seeds, list) or not seeds:
         raise ModelError("seeds must be a non-empty list")
+    if len(set(map(str, seeds))) != len(seeds):
+        raise ModelError(f"seeds lists a seed twice: {seeds}")
+    for seed in seeds:
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", str(seed)):
+            raise ModelError(f"a seed must be a plain name (letters, digits, . _ -), got "
+                             f"{seed!r}")
     run = data.get("run", {})
     for key, value in run.items():
         kind = RUN_KEYS.get(key)
@@ -199,6 +227,7 @@ def run_point(point: Point, root: str) -> dict:
     folder = Path(root) / "points" / point.name
     failed = folder.with_name(point.name + ".failed.json")
     t0 = time.perf_counter()
+    _write_json(folder.with_name(point.name + ".point.json"), point.identity())
     if _status(folder) not in FINISHED:
         failed.unlink(missing_ok=True)  # a failure of before is tried again
         try:
@@ -217,6 +246,53 @@ def run_point(point: Point, root: str) -> dict:
             _write_json(failed, {"point": point.name, "reason": f"{type(err).__name__}: {err}",
                                  "seconds": round(time.perf_counter() - t0, 2)})
     return {**row(point, Path(root)), "task_s": time.perf_counter() - t0}
+
+
+def changed(point: Point, root: Path) -> str | None:
+    """Why the point's folder (or failure record) is not this point's — its parameters,
+    seed, run options or the physics' version differ from the recorded ones — or None (also
+    when nothing was run yet)."""
+    folder = root / "points" / point.name
+    record = folder.with_name(point.name + ".point.json")
+    made = [p for p in (folder, folder.with_name(point.name + ".failed.json"),
+                        folder.with_name(point.name + ".seed.json")) if p.exists()]
+    if not made:
+        return None
+    try:
+        recorded = json.loads(record.read_text())
+    except (OSError, ValueError):
+        return "its folder records no parameters (an older fem_ade made it)"
+    from .runs import _identity_difference
+
+    difference = _identity_difference(recorded, point.identity())
+    return None if difference is None else difference.replace(" in run.json", " now").replace(
+        "in the checkpoint", "when it ran")
+
+
+def forget(point: Point, root: Path) -> None:
+    """Remove what an earlier run of the point left (its run's files, its records)."""
+    import shutil
+
+    folder = root / "points" / point.name
+    if folder.is_dir():
+        shutil.rmtree(folder)
+    for suffix in (".failed.json", ".seed.json", ".point.json"):
+        folder.with_name(point.name + suffix).unlink(missing_ok=True)
+
+
+def check_points(sweep: Sweep, root: Path, rerun_changed: bool) -> None:
+    """Before anything runs or is reported: the folder of every point must be that point's
+    (:func:`changed`); with ``rerun_changed`` a changed one is removed, to run anew, else
+    the sweep is refused with one line naming the first difference."""
+    for point in sweep.points():
+        why = changed(point, root)
+        if why is None:
+            continue
+        if not rerun_changed:
+            raise ModelError(f"point {point.name} in {root} was run with other settings "
+                             f"({why}); give another --out, or --rerun-changed to run it "
+                             "anew")
+        forget(point, root)
 
 
 def _status(folder: Path) -> str | None:
@@ -317,16 +393,22 @@ def _cell(value):
 
 
 def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | None = None,
-              quiet: bool = False, retry_s: float = 2.0, retry_failed: bool = False
-              ) -> list[dict]:
+              quiet: bool = False, retry_s: float = 2.0, retry_failed: bool = False,
+              rerun_changed: bool = False) -> list[dict]:
     """Run every unfinished point on Dask (``retry_failed``: the failed ones too); the
-    table's rows (also written to sweep.csv)."""
+    table's rows (also written to sweep.csv). A point's folder made with other settings is
+    refused (:func:`check_points`) or, with ``rerun_changed``, run anew."""
     from dask.distributed import Client, LocalCluster, as_completed
 
     from .lock import FolderLock
 
     out.mkdir(parents=True, exist_ok=True)
     lock = FolderLock(out).acquire()  # one driver per sweep folder
+    try:
+        check_points(sweep, out, rerun_changed)
+    except BaseException:
+        lock.release()
+        raise
     points = sweep.points()
     axes = list(sweep.axes)
     _write_json(out / "sweep.json", {"name": sweep.name, "base": sweep.base,
@@ -421,6 +503,9 @@ def main(argv=None) -> int:
                        help="an existing Dask scheduler: tcp://HOST:PORT or its scheduler file")
     ap.add_argument("--retry-failed", action="store_true",
                     help="run the points recorded as failed again (they are skipped otherwise)")
+    ap.add_argument("--rerun-changed", action="store_true",
+                    help="run anew the points whose folder was made with other settings (a "
+                         "sweep refuses them otherwise)")
     ap.add_argument("--report-only", action="store_true",
                     help="rebuild the table and the pictures from the folders; run nothing")
     ap.add_argument("--quiet", action="store_true")
@@ -440,12 +525,14 @@ def main(argv=None) -> int:
         if args.report_only:
             if not (out / "sweep.json").is_file():
                 raise ModelError(f"{out} holds no sweep to report on (run it first)")
+            check_points(sweep, out, rerun_changed=False)
             points = sweep.points()
             rows = [row(p, out) for p in points]
             write_table(rows, out / "sweep.csv", list(sweep.axes))
         else:
             rows = run_sweep(sweep, out, workers=args.workers, scheduler=args.scheduler,
-                             quiet=args.quiet, retry_failed=args.retry_failed)
+                             quiet=args.quiet, retry_failed=args.retry_failed,
+                             rerun_changed=args.rerun_changed)
     except FolderBusy as err:
         print(f"fem_ade.sweep: error: {err}", file=sys.stderr)
         return 2

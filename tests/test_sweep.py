@@ -192,3 +192,42 @@ def test_sweep_point_in_the_axisymmetric_geometry(tmp_path):
 
     info = json.loads((tmp_path / "out" / "points" / point.name / "summary.json").read_text())
     assert info["backend_info"]["geometry"] == "axisymmetric"
+
+
+def test_a_point_is_its_parameters_not_its_name(tmp_path, capsys):
+    """Change the sweep's fixed ε and run it again into the same folder: it is refused with
+    one line naming the difference (the old table is not shown under the new file), also
+    with --report-only; --rerun-changed runs the changed points anew."""
+    path = _file(tmp_path, axes="[0.9]", steps=6)
+    out = tmp_path / "out"
+    assert main([str(path), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    first = _table(out / "sweep.csv")
+    path.write_text(path.read_text().replace("eps = 0.08", "eps = 0.1"))
+    capsys.readouterr()
+    for extra in ([], ["--report-only"]):
+        assert main([str(path), "--out", str(out), "--workers", "1", "--quiet", *extra]) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and "fixed.eps: 0.08 when it ran, 0.1 now" \
+            in err, err
+    assert _table(out / "sweep.csv") == first
+    assert main([str(path), "--out", str(out), "--workers", "1", "--quiet",
+                 "--rerun-changed"]) == 0
+    again = _table(out / "sweep.csv")
+    assert again[0]["status"] == "max_steps" and again[0]["E"] != first[0]["E"]
+
+
+def test_point_names_never_collide(tmp_path):
+    """Values that print alike get names that differ; a value or a seed listed twice, or a
+    seed that is no plain name, is refused before anything runs."""
+    sweep = load_sweep(_file(tmp_path, axes="[0.9, 0.9000001]"))
+    names = [p.name for p in sweep.points()]
+    assert len(set(names)) == 2, names
+    for axes, match in (("[0.9, 0.9]", "lists a value twice"),):
+        with pytest.raises(ModelError, match=match):
+            load_sweep(_file(tmp_path, axes=axes))
+    for seeds, match in (('["sphere", "sphere"]', "a seed twice"),
+                         ('["a/b"]', "plain name")):
+        path = _file(tmp_path)
+        path.write_text(path.read_text().replace('seeds = ["sphere"]', f"seeds = {seeds}"))
+        with pytest.raises(ModelError, match=match):
+            load_sweep(path)
