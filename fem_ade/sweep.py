@@ -174,11 +174,11 @@ def load_sweep(path: str | Path) -> Sweep:
     for key, spec in data.get("axes", {}).items():
         if isinstance(spec, dict):
             try:
-                start, stop, num = float(spec["start"]), float(spec["stop"]), int(spec["num"])
+                start, stop, num = float(spec["start"]), float(spec["stop"]), spec["num"]
             except (KeyError, TypeError, ValueError):
                 raise ModelError(f"axes.{key} as a table needs start, stop and num") from None
-            if num < 1:
-                raise ModelError(f"axes.{key}.num must be >= 1")
+            if isinstance(num, bool) or not isinstance(num, int) or num < 1:
+                raise ModelError(f"axes.{key}.num must be an integer >= 1, got {num!r}")
             axes[key] = [round(start + (stop - start) * i / max(num - 1, 1), 10)
                          for i in range(num)]
         elif isinstance(spec, list) and spec:
@@ -200,7 +200,25 @@ def load_sweep(path: str | Path) -> Sweep:
         if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", str(seed)):
             raise ModelError(f"a seed must be a plain name (letters, digits, . _ -), got "
                              f"{seed!r}")
+    fixed = data.get("scene", {})
+    if not isinstance(fixed, dict):
+        raise ModelError("[scene] must be a table")
+    both = sorted(set(fixed) & set(axes))
+    if both:
+        raise ModelError(f"{', '.join(both)} is both fixed ([scene]) and swept ([axes])")
+    if base == "vesicle":
+        from .vesicle import Vesicle
+
+        allowed = set(Vesicle.__dataclass_fields__) - {"branch"}
+        for table, keys in (("scene", fixed), ("axes", axes)):
+            bad = sorted(set(keys) - allowed)
+            if bad:
+                raise ModelError(f"[{table}] {', '.join(bad)}: not a parameter of the vesicle "
+                                 f"family (its branch is the seed); valid: "
+                                 f"{', '.join(sorted(allowed))}")
     run = data.get("run", {})
+    if not isinstance(run, dict):
+        raise ModelError("[run] must be a table")
     for key, value in run.items():
         kind = RUN_KEYS.get(key)
         if kind is None:
@@ -209,10 +227,50 @@ def load_sweep(path: str | Path) -> Sweep:
             run[key] = float(value)
         elif not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
             raise ModelError(f"run.{key} must be of type {kind.__name__}, got {value!r}")
-    sweep = Sweep(str(data.get("name", path.stem)), base, axes, dict(data.get("scene", {})),
-                  seeds, run)
-    sweep.points()[0].scene()  # bad scene parameters fail here, before anything runs
+    sweep = Sweep(str(data.get("name", path.stem)), base, axes, dict(fixed), seeds, run)
+    check_sweep(sweep)
     return sweep
+
+
+def check_sweep(sweep: Sweep) -> None:
+    """Every point's parameters and the run options, before anything runs (ModelError, one
+    line): each point's vesicle (or scene) without its sharp seed, and the first point's
+    run — its scene built, its configuration checked as a run's."""
+    from .config import RunConfig
+    from .registry import RECIPES
+
+    if "recipe" in sweep.run and sweep.run["recipe"] not in RECIPES:
+        raise ModelError(f"unknown recipe {sweep.run['recipe']!r}; valid: "
+                         f"{', '.join(RECIPES)}")
+    points = sweep.points()
+    for point in points:
+        try:
+            if point.base == "vesicle":
+                from .vesicle import Vesicle
+
+                Vesicle(**point.fixed, **point.values, branch=point.seed).check()
+            elif point is points[0]:
+                pass  # built below
+        except TypeError as err:
+            raise ModelError(f"point {point.name}: {err}") from None
+        except ModelError as err:
+            raise ModelError(f"point {point.name}: {err}") from None
+    first = points[0]
+    try:
+        scene = first.scene()
+        kw = first.options(scene)
+        allow = kw.pop("allow_underresolved", False)
+        kw.pop("checkpoint_every", None)
+        config = RunConfig.build(scene, **{k: v for k, v in kw.items() if k in (
+            "backend", "n", "dt", "steps", "until_steady", "backend_options")},
+            **{k: v for k, v in kw.items() if k in (
+                "max_steps", "every", "scheme", "constraints", "accelerate", "perturb",
+                "render", "seed")})
+        config.check(scene, allow_underresolved=allow)
+    except TypeError as err:
+        raise ModelError(f"point {first.name}: {err}") from None
+    except ModelError as err:
+        raise ModelError(f"point {first.name}: {err}") from None
 
 
 # ---------------------------------------------------------------------------------------
@@ -280,6 +338,60 @@ def forget(point: Point, root: Path) -> None:
         folder.with_name(point.name + suffix).unlink(missing_ok=True)
 
 
+def check_out(out: Path) -> None:
+    """``--out``: a sweep's folder (it holds sweep.json) or a new or empty folder that can be
+    made there; ModelError (one line) otherwise — nothing is made here."""
+    if str(out) in ("", "."):
+        raise ModelError("--out needs a folder name")
+    if out.exists() or out.is_symlink():
+        if not out.is_dir():
+            raise ModelError(f"--out {out} is not a folder")
+        if any(out.iterdir()) and not (out / "sweep.json").is_file():
+            raise ModelError(f"--out {out} holds other files and no sweep: give a new or empty "
+                             "folder, or the folder of this sweep")
+        if not os.access(out, os.W_OK | os.X_OK):
+            raise ModelError(f"--out {out} is not writable")
+        return
+    parent = out.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise ModelError(f"cannot make --out {out}: {parent} is not a writable folder")
+
+
+def connect(scheduler: str | None, workers: int):
+    """(client, cluster or None): a LocalCluster of ``workers`` processes, or a client of the
+    scheduler at ``scheduler`` (an address, or a scheduler file) within 10 s; ModelError
+    (one line) for an address that does not answer, resolve or parse, or a file that is no
+    scheduler's."""
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=":0", silence_logs=40)
+        return Client(cluster), cluster
+    if not scheduler.strip():
+        raise ModelError("--scheduler needs an address (tcp://HOST:PORT) or a scheduler file")
+    path = Path(scheduler)
+    try:
+        if path.is_file():
+            try:
+                info = json.loads(path.read_text())
+            except (OSError, ValueError) as err:
+                raise ModelError(f"--scheduler {scheduler} is not a scheduler file ({err})") \
+                    from None
+            if not isinstance(info, dict) or "address" not in info:
+                raise ModelError(f"--scheduler {scheduler} is not a scheduler file (no "
+                                 "address in it)")
+            return Client(scheduler_file=str(path), timeout="10s"), None
+        return Client(scheduler, timeout="10s"), None
+    except ModelError:
+        raise
+    except Exception as err:  # noqa: BLE001 (dask raises OSError, TimeoutError, ValueError...)
+        text = " ".join(str(err).split())[:200] or type(err).__name__
+        raise ModelError(f"cannot reach the Dask scheduler at {scheduler}: {text}") from None
+
+
 def check_points(sweep: Sweep, root: Path, rerun_changed: bool) -> None:
     """Before anything runs or is reported: the folder of every point must be that point's
     (:func:`changed`); with ``rerun_changed`` a changed one is removed, to run anew, else
@@ -311,7 +423,6 @@ def _write_json(path: Path, data) -> None:
 
 def row(point: Point, root: Path) -> dict:
     """The table row of a point, from its run folder (or its failure record)."""
-    from .sharp import reduced_energy
 
     folder = root / "points" / point.name
     out = {"point": point.name, **point.values, "seed": point.seed}
@@ -323,10 +434,24 @@ def row(point: Point, root: Path) -> dict:
         s = json.loads((folder / "summary.json").read_text())
     except (OSError, ValueError):
         return {**out, "status": "pending"}
+    if not isinstance(s, dict):
+        return {**out, "status": "damaged", "reason": "its summary.json is not a table"}
     try:
         seed = json.loads(folder.with_name(point.name + ".seed.json").read_text())
     except (OSError, ValueError):
         seed = {}
+    if not isinstance(seed, dict):
+        seed = {}
+    try:
+        return _row_of_summary(out, s, seed)
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
+        return {**out, "status": "damaged",
+                "reason": f"its summary.json is damaged ({type(err).__name__}: {err})"}
+
+
+def _row_of_summary(out: dict, s: dict, seed: dict) -> dict:
+    from .sharp import reduced_energy
+
     f, shape = s.get("final", {}), s.get("shape") or {}
     sharp = shape.get("sharp") or {}
     ref = s.get("sharp_reference") or {}
@@ -398,17 +523,27 @@ def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | Non
     """Run every unfinished point on Dask (``retry_failed``: the failed ones too); the
     table's rows (also written to sweep.csv). A point's folder made with other settings is
     refused (:func:`check_points`) or, with ``rerun_changed``, run anew."""
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import as_completed
 
     from .lock import FolderLock
 
-    out.mkdir(parents=True, exist_ok=True)
-    lock = FolderLock(out).acquire()  # one driver per sweep folder
+    check_out(out)
+    for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+              "FEM_ADE_FFT_WORKERS"):
+        os.environ.setdefault(k, "1")  # one thread per worker process
+    if out.is_dir() and not rerun_changed:  # its points must be this sweep's: nothing made
+        check_points(sweep, out, rerun_changed=False)
+    client, cluster = connect(scheduler, workers)  # a refused scheduler: nothing written
     try:
-        check_points(sweep, out, rerun_changed)
+        out.mkdir(parents=True, exist_ok=True)
+        lock = FolderLock(out).acquire()  # one driver per sweep folder
     except BaseException:
-        lock.release()
+        client.close()
+        if cluster is not None:
+            cluster.close()
         raise
+    if rerun_changed:  # under the lock: remove the changed points' runs
+        check_points(sweep, out, rerun_changed=True)
     points = sweep.points()
     axes = list(sweep.axes)
     _write_json(out / "sweep.json", {"name": sweep.name, "base": sweep.base,
@@ -418,18 +553,7 @@ def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | Non
     rows = {p.name: row(p, out) for p in points}
     done = (*FINISHED, "failed") if not retry_failed else FINISHED
     todo = [p for p in points if rows[p.name]["status"] not in done]
-    for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-              "FEM_ADE_FFT_WORKERS"):
-        os.environ.setdefault(k, "1")  # one thread per worker process
-    cluster = None
     try:
-        if scheduler:  # an address, or a scheduler file (dask scheduler --scheduler-file)
-            client = (Client(scheduler_file=scheduler) if Path(scheduler).is_file()
-                      else Client(scheduler))
-        else:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=":0", silence_logs=40)
-            client = Client(cluster)
         say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
         say(f"sweep {sweep.name}: {len(points)} points, {len(points) - len(todo)} done, "
             f"{len(todo)} to run on {_workers_text(client)}; dashboard {client.dashboard_link}")
@@ -520,6 +644,8 @@ def main(argv=None) -> int:
     try:
         if args.workers < 1:
             raise ModelError(f"--workers must be >= 1, got {args.workers}")
+        if args.out == "":
+            raise ModelError("--out needs a folder name")
         sweep = load_sweep(args.sweep)
         out = Path(args.out or Path("runs") / "sweeps" / sweep.name)
         if args.report_only:

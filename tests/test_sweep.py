@@ -70,23 +70,29 @@ def test_sweep_file_and_points(tmp_path):
 
 def test_sweep_runs_skips_and_records_a_failure(tmp_path, capsys):
     """On a LocalCluster of two processes: every point runs to its end, the table has its
-    columns and one row per point; a point with bad parameters is recorded as failed with
-    its reason and does not stop the rest; run again, nothing runs twice."""
-    sweep = load_sweep(_file(tmp_path, axes="[0.8, 0.9, 1.2]"))
+    columns and one row per point; a point that fails when it is built (its seed does not
+    fit the box at that R₀) is recorded as failed with its reason and does not stop the
+    rest; run again, nothing runs twice. (A value no point can take — v = 1.2 — is refused
+    before anything runs: ``test_bad_sweeps_are_one_line_before_anything_runs``.)"""
+    path = _file(tmp_path, axes="[0.8, 0.9]")
+    path.write_text(path.read_text().replace("[axes]\n", "[axes]\nR0 = [0.2, 0.45]\n"))
+    sweep = load_sweep(path)
     out = tmp_path / "out"
     rows = run_sweep(sweep, out, workers=2, quiet=True)
     table = _table(out / "sweep.csv")
-    assert list(table[0]) == ["point", "v", *COLUMNS]
-    assert [r["point"] for r in table] == ["v=0.8_seed=sphere", "v=0.9_seed=sphere",
-                                           "v=1.2_seed=sphere"]
-    good, bad = table[:2], table[2]
+    assert list(table[0]) == ["point", "R0", "v", *COLUMNS]
+    assert [r["point"] for r in table] == ["R0=0.2_v=0.8_seed=sphere", "R0=0.2_v=0.9_seed=sphere",
+                                           "R0=0.45_v=0.8_seed=sphere",
+                                           "R0=0.45_v=0.9_seed=sphere"]
+    good, bad = table[:2], table[2:]
     for r in good:
         assert r["status"] == "max_steps" and r["steps"] == "12" and r["components"] == "1"
         assert float(r["E"]) > 0 and r["label"]
-    assert bad["status"] == "failed" and "vesicle v must be" in bad["reason"]
+    for r in bad:
+        assert r["status"] == "failed" and "does not fit the box" in r["reason"], r
     assert rows[2]["status"] == "failed"
     stamps = {p: (out / "points" / p / "summary.json").stat().st_mtime_ns
-              for p in ("v=0.8_seed=sphere", "v=0.9_seed=sphere")}
+              for p in ("R0=0.2_v=0.8_seed=sphere", "R0=0.2_v=0.9_seed=sphere")}
     again = run_sweep(sweep, out, workers=2, quiet=True)
     assert [r["status"] for r in again] == [r["status"] for r in rows]
     assert stamps == {p: (out / "points" / p / "summary.json").stat().st_mtime_ns
@@ -100,7 +106,7 @@ def test_sweep_runs_skips_and_records_a_failure(tmp_path, capsys):
     again = run_sweep(sweep, out, workers=2, quiet=True, retry_failed=True)  # fails again
     assert again[2]["status"] == "failed" and "task_s" in again[2]
     (out / "sweep.csv").unlink()
-    assert main([str(tmp_path / "s.toml"), "--out", str(out), "--report-only"]) == 0
+    assert main([str(path), "--out", str(out), "--report-only"]) == 0
     assert _table(out / "sweep.csv") == table and (out / "phase-diagram.png").is_file()
 
 
@@ -231,3 +237,92 @@ def test_point_names_never_collide(tmp_path):
         path.write_text(path.read_text().replace('seeds = ["sphere"]', f"seeds = {seeds}"))
         with pytest.raises(ModelError, match=match):
             load_sweep(path)
+
+
+def _bad_file(tmp_path, change):
+    path = _file(tmp_path, axes="[0.9]", steps=4)
+    path.write_text(change(path.read_text()))
+    return path
+
+
+#: (what is wrong, how the sweep file changes or the extra arguments, a word of the message)
+BAD_SWEEPS = [
+    ("branch as an axis", lambda t: t.replace("v = [0.9]", "branch = ['prolate']"),
+     "not a parameter"),
+    ("v fixed and swept", lambda t: t.replace("eps = 0.08", "eps = 0.08\nv = 0.8"),
+     "both fixed"),
+    ("a word in an axis", lambda t: t.replace("[0.9]", "[0.9, 'x']"), "vesicle v must be"),
+    ("num not an integer", lambda t: t.replace("[0.9]", "{start = 0.8, stop = 0.9, num = 2.5}"),
+     "integer"),
+    ("n below the least", lambda t: t.replace("n = 16", "n = -5"), "n must be"),
+    ("an unknown backend", lambda t: t.replace('"spectral"', '"bogus"'), "backend"),
+    ("an unknown recipe", lambda t: t.replace('recipe = "steady"', 'recipe = "bogus"'),
+     "recipe"),
+    ("order 0", lambda t: t.replace('backend = "spectral"\nn = 16',
+                                    'backend = "fem"\nn = 16\nbackend_options = {order = 0}'),
+     "order"),
+    ("max_steps 0", lambda t: t.replace("max_steps = 4", "max_steps = 0"), "max-steps"),
+]
+
+
+@pytest.mark.parametrize("case", BAD_SWEEPS, ids=[c[0] for c in BAD_SWEEPS])
+def test_bad_sweeps_are_one_line_before_anything_runs(tmp_path, capsys, case):
+    _, change, word = case
+    out = tmp_path / "out"
+    code = main([str(_bad_file(tmp_path, change)), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and word in err, err
+    assert not out.exists(), "a refused sweep wrote something"
+
+
+@pytest.mark.parametrize("case", ["a file", "/dev/null", "read-only", "unrelated folder",
+                                  "a run folder", "empty --out", "empty --scheduler",
+                                  "refused address", "unknown scheme", "garbage file",
+                                  "empty file"])
+def test_bad_places_are_one_line_and_write_nothing(tmp_path, capsys, case):
+    path = _file(tmp_path, axes="[0.9]", steps=4)
+    out, extra = tmp_path / "out", []
+    if case == "a file":
+        out.write_text("x")
+    elif case == "/dev/null":
+        out = Path("/dev/null")
+    elif case == "read-only":
+        ro = tmp_path / "ro"
+        ro.mkdir()
+        ro.chmod(0o500)
+        out = ro / "sweep"
+        if os.access(ro, os.W_OK):  # root writes anywhere: nothing to refuse
+            pytest.skip("running as root: a read-only folder is writable")
+    elif case == "unrelated folder":
+        out.mkdir()
+        (out / "notes.txt").write_text("mine")
+    elif case == "a run folder":
+        out.mkdir()
+        (out / "run.json").write_text("{}")
+    elif case == "empty --out":
+        out = Path("")
+    else:
+        sched = {"empty --scheduler": "", "refused address": "tcp://127.0.0.1:9",
+                 "unknown scheme": "bogus://host:1"}.get(case)
+        if sched is None:
+            sched = tmp_path / "sched.json"
+            sched.write_text("not json" if case == "garbage file" else "")
+        extra = ["--scheduler", str(sched)]
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code = main([str(path), "--out", str(out), "--quiet", *extra])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_report_only_over_damaged_folders(tmp_path, capsys):
+    """A point folder whose summary.json is damaged reads as "damaged" in the table, not a
+    traceback."""
+    path = _file(tmp_path, axes="[0.9]", steps=4)
+    out = tmp_path / "out"
+    assert main([str(path), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    (point,) = (out / "points").glob("*/summary.json")
+    point.write_text('{"final": 3}')
+    assert main([str(path), "--out", str(out), "--report-only"]) == 1
+    (row,) = _table(out / "sweep.csv")
+    assert row["status"] == "damaged" and "summary.json" in row["reason"]
