@@ -330,6 +330,9 @@ def _main(argv, scratch: str | None = None) -> int:
         if args.scene == "vesicle":
             from .scenes import vesicle_scene
 
+            if "ic" in given:
+                raise ModelError("--ic picks a reading of the paper's initial ellipsoid; a "
+                                 "vesicle starts from the sharp shape of its --branch")
             scene = vesicle_scene(**chosen)
         elif chosen:
             raise ModelError(f"--{', --'.join(chosen)} describe the vesicle scene; "

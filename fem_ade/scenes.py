@@ -264,6 +264,10 @@ SCENES: dict[str, Scene] = {**PAPER_SCENES, **TEACHING_SCENES}
 
 #: scene families: made from physical parameters (``get_scene(NAME)`` is the defaults)
 FAMILIES = ("vesicle",)
+#: the Params fields the vesicle family derives from its own parameters (a TOML scene with
+#: base = "vesicle" sets them in [vesicle], not in [params])
+VESICLE_PARAMS = frozenset({"eps", "alpha", "beta", "delta_A0", "kappa_bar", "C", "D", "L",
+                            "effects", "volume_functional", "A0"})
 
 
 def vesicle_scene(**kw) -> Scene:
@@ -377,6 +381,11 @@ def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = 
 
     if "dim" in scene_kw and scene_kw["dim"] not in (2, 3):
         raise ModelError(f"dim must be 2 or 3, got {scene_kw['dim']}")
+    if base == "vesicle":
+        fixed = sorted(set(param_kw) & VESICLE_PARAMS)
+        if fixed:
+            raise ModelError(f"[params] {', '.join(fixed)}: the [vesicle] table sets "
+                             "these (v, da0, kbar, C, eps, R0, L); give them there")
     base_scene = (vesicle_scene(**(vesicle_t or {})) if base == "vesicle" else
                   get_scene(base) if base is not None else None)
     dim = scene_kw.get("dim", base_scene.dim if base_scene else 3)

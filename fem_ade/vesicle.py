@@ -38,6 +38,12 @@ from .registry import VESICLE_BRANCHES
 
 #: the branches a vesicle can start on
 BRANCHES = VESICLE_BRANCHES
+#: the smallest reduced volume of the family (its sharp branches end above it; a spheroid
+#: of v = 0.2 is 12 times as long as it is wide)
+V_MIN = 0.2
+#: a vesicle must be at least this many ε across its thinnest part (else the phase field
+#: has no membrane to speak of: at v = 0.3 the default box gave R₀ = 1.3ε)
+THICKNESS_PER_EPS = 2.0
 #: ε/h of the default grid, and Δt / ε³
 NODES_PER_EPS = 1.28
 DT_PER_EPS3 = 0.0075
@@ -81,6 +87,16 @@ class Vesicle:
         if self.branch not in BRANCHES:
             raise ModelError(f"vesicle branch must be one of {', '.join(BRANCHES)}, got "
                              f"{self.branch!r}")
+        if (self.kbar > 0) != (self.da0 is not None):
+            raise ModelError("vesicle kbar and da0 go together: area-difference elasticity "
+                             "needs kbar > 0 (kappa_bar/kappa) and da0 (the relaxed reduced "
+                             "area difference)" + (f"; got kbar = {self.kbar:g} without da0"
+                                                   if self.kbar > 0 else
+                                                   f"; got da0 = {self.da0:g} without kbar"))
+        if self.v < V_MIN:
+            raise ModelError(f"vesicle v = {self.v:g}: below {V_MIN} no seed of this family "
+                             "fits (no sharp shape of its branches, a spheroid too slender to "
+                             "resolve)")
         return self
 
     @property
@@ -100,8 +116,8 @@ def sharp_shape(branch: str, v: float, m0: float, kbar: float, c: float):
 
     try:
         return solve_cached(branch, round(v, 6), round(m0, 6), round(kbar, 6), round(c, 6))
-    except BranchError:
-        return None
+    except (BranchError, ArithmeticError, ValueError, np.linalg.LinAlgError):
+        return None  # no such shape here, or the solver cannot find one
 
 
 def sharp_of(branch: str, **kw):
@@ -131,8 +147,12 @@ def spheroid_meridian(v: float, prolate: bool, points: int = 201) -> tuple[np.nd
         area, volume = shape(q)
         return volume / (4.0 * math.pi / 3.0 * (area / (4.0 * math.pi)) ** 1.5) - v
 
-    q = 1.0 if v >= 1.0 else (brentq(reduced, 1.0 + 1e-9, 200.0) if prolate else
-                              brentq(reduced, 1e-3, 1.0 - 1e-9))
+    try:
+        q = 1.0 if v >= 1.0 else (brentq(reduced, 1.0 + 1e-9, 200.0) if prolate else
+                                  brentq(reduced, 1e-3, 1.0 - 1e-9))
+    except ValueError:
+        raise ModelError(f"no {'prolate' if prolate else 'oblate'} spheroid has reduced volume "
+                         f"{v:g}") from None
     area, _ = shape(q)
     a = math.sqrt(4.0 * math.pi / area)  # scaled to area 4π
     th = np.linspace(0.0, math.pi, points)
@@ -187,6 +207,11 @@ def vesicle_parts(**kw) -> dict:
         raise ModelError(f"the {ves.branch} at v = {ves.v} with R0 = {R0:g} does not fit the "
                          f"box with 0.1 L + 2 eps to spare (extent {extent * R0:.3g} L); "
                          "give a smaller R0 or leave it out")
+    thin = min(float(np.ptp(z)), 2.0 * float(np.max(r)))  # the body's thickness, R₀ = 1
+    if thin * R0 < THICKNESS_PER_EPS * ves.eps:
+        raise ModelError(f"the {ves.branch} at v = {ves.v:g} is {thin * R0 / ves.eps:.2g} eps "
+                         f"thick (R0 = {R0:.3g} in the box): below {THICKNESS_PER_EPS:g} eps "
+                         "the phase field has no membrane to speak of; give a smaller eps")
     D = 2.0 * ves.eps / 3.0
     effects = {"bending", "volume", "area"}
     if ves.ade[1]:

@@ -173,5 +173,5 @@ def test_sharp_reference_imports_nothing_of_the_phase_field():
             elif isinstance(node, ast.Import):
                 for a in node.names:
                     assert a.name.split(".")[0] in {"numpy", "scipy", "math", "argparse",
-                                                    "json", "sys", "warnings",
+                                                    "json", "sys", "warnings", "signal",
                                                     "threadpoolctl"}, (m, a.name)

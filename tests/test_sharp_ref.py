@@ -183,3 +183,33 @@ def test_a_run_meets_its_sharp_shape(monkeypatch):
     missing = compare(p, {**shape, "label": "oblate"}, {"W": 1.0})
     assert missing["missing"].startswith("no oblate here")
     assert missing["line"].startswith("no sharp oblate at v = 0.800 to compare with")
+
+
+@pytest.mark.parametrize("args, code, word", [
+    (["prolate", "--v", "2"], 2, "--v must be"),
+    (["cube"], 2, "invalid choice"),
+    (["prolate", "--v", "0.8", "--da", "1.2"], 2, "--kbar"),
+    (["prolate", "--v", "0.8", "--kbar", "1e9", "--da", "2", "--max-seconds", "3"], 2,
+     "did not converge within 3 s"),
+])
+def test_command_line_mistakes_are_one_line(args, code, word):
+    """Usage errors, ADE half given, and a solve that cannot converge (within a bounded
+    time): one line on stderr, exit 2."""
+    r = _cli(*args)
+    assert r.returncode == code and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert word in r.stderr, r.stderr
+
+
+def test_command_line_under_an_ascii_locale_and_to_a_full_device():
+    import os
+
+    env = {**os.environ, "LC_ALL": "C", "PYTHONIOENCODING": "ascii"}
+    r = subprocess.run([sys.executable, "-m", "sharp_ref", "--help"], capture_output=True,
+                       env=env, timeout=60)
+    assert r.returncode == 0 and b"usage" in r.stdout
+    if os.path.exists("/dev/full"):
+        with open("/dev/full", "w") as full:
+            r = subprocess.run([sys.executable, "-m", "sharp_ref", "sphere", "--v", "1",
+                                "--quiet"], stdout=full, stderr=subprocess.PIPE, text=True,
+                               timeout=60)
+        assert r.returncode == 3 and "cannot write" in r.stderr

@@ -42,8 +42,10 @@ def test_parameters_map_to_the_model():
     assert abs(_meridian_v(s.ic.r, s.ic.z) - 0.85) < 1e-3
     # the prolate keeps 0.1 + 2ε from the faces (nearer, it merges with its images)
     assert np.ptp(s.ic.z) * R0 + 0.2 + 4 * 0.04 == pytest.approx(1.0, abs=1e-9)
-    minimal = vesicle_scene(v=0.85, kbar=1.4)  # no da0: no ADE
-    assert not minimal.params.on("ade")
+    assert not vesicle_scene(v=0.85).params.on("ade")
+    for kw in ({"kbar": 1.4}, {"da0": 1.3}):  # half of the ADE term is refused, not ignored
+        with pytest.raises(ModelError, match="kbar and da0 go together"):
+            vesicle_scene(v=0.85, **kw)
 
 
 def test_spheroid_seed_and_bad_input():
@@ -57,7 +59,9 @@ def test_spheroid_seed_and_bad_input():
         vesicle_scene(v=0.8, branch="pear")
     for kw, match in [({"v": 0.0}, "vesicle v"), ({"branch": "cube"}, "branch must be"),
                       ({"eps": 0.5}, "vesicle eps"), ({"colour": 1}, "unknown vesicle"),
-                      ({"v": 0.55, "R0": 0.4}, "does not fit")]:
+                      ({"v": 0.55, "R0": 0.4}, "does not fit"),
+                      ({"v": 1e-9}, "below 0.2"), ({"v": 0.3}, "eps thick"),
+                      ({"eps": 0.125}, "eps thick")]:
         with pytest.raises(ModelError, match=match):
             vesicle_scene(**kw)
 
@@ -88,3 +92,20 @@ def test_from_toml_and_the_command_line(tmp_path):
     assert r.returncode == 2 and "describe the vesicle scene" in r.stderr
     r = cli("vesicle", "--v", "1.3")
     assert r.returncode == 2 and "vesicle v must be" in r.stderr
+
+
+def test_vesicle_mistakes_on_the_command_line_and_in_toml(tmp_path, cli):
+    """What the vesicle family ignored or crashed on before: one line, exit 2, nothing
+    written — --ic (the paper's ellipsoid's reading), a v no seed reaches, a vesicle thinner
+    than 2 eps, half of the ADE term, and a TOML [params] key the [vesicle] table sets."""
+    for args, word in ((["--ic", "printed"], "--ic"), (["--v", "1e-9"], "below 0.2"),
+                       (["--v", "0.3"], "eps thick"), (["--kbar", "1.4"], "go together")):
+        r = cli(["vesicle", *args, "--out", tmp_path / "x"])
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert word in r.stderr and not (tmp_path / "x").exists()
+    from fem_ade.scenes import load_scene_file
+
+    path = tmp_path / "v.toml"
+    path.write_text('base = "vesicle"\n[vesicle]\nv = 0.9\neps = 0.04\n[params]\neps = 0.02\n')
+    with pytest.raises(ModelError, match=r"\[vesicle\] table sets"):
+        load_scene_file(path)
