@@ -232,8 +232,17 @@ def physical_memory() -> float:
 
 def fft_workers() -> int:
     """Threads of scipy's FFTs: ``FEM_ADE_FFT_WORKERS`` (e.g. 1 for a background job beside
-    other work), else all cores (-1)."""
-    return int(os.environ.get("FEM_ADE_FFT_WORKERS", "-1"))
+    other work), else all cores (-1); ModelError for a value that is not -1 or a positive
+    integer."""
+    text = os.environ.get("FEM_ADE_FFT_WORKERS", "-1").strip()
+    try:
+        workers = int(text)
+    except ValueError:
+        workers = 0
+    if workers == 0 or workers < -1:
+        raise ModelError(f"FEM_ADE_FFT_WORKERS must be a positive integer (threads of the "
+                         f"FFTs) or -1 (all cores), got {text!r}")
+    return workers
 
 
 def check_choice(what: str, value, valid) -> None:
@@ -257,5 +266,12 @@ def check_backend(name: str, scene: Scene, **kwargs) -> None:
 
 
 def make_backend(name: str, scene: Scene, **kwargs) -> Backend:
-    """Build backend ``name`` for ``scene``. Unknown names raise :class:`ModelError`."""
+    """Build backend ``name`` for ``scene``. Unknown names raise :class:`ModelError`, so do
+    an n that is not a positive integer and a scene that is not a Scene (TypeError)."""
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+    n = kwargs.get("n")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ModelError(f"n must be a positive integer, got {n!r}")
+    kwargs["n"] = int(n)
     return backend_class(name, **kwargs)(scene, **kwargs)

@@ -72,7 +72,15 @@ class RunConfig:
         line; TypeError for a value of the wrong kind)."""
         from .backend import backend_class
         from .loop import AdaptiveDt
+        from .scenes import Scene
 
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+        n, steps = (int(x) if isinstance(x, np.integer) else x for x in (n, steps))
+        for name in ("max_steps", "every", "seed", "checkpoint_every", "save_every",
+                     "shape_every"):
+            if isinstance(kwargs.get(name), np.integer):  # numpy's integers are integers
+                kwargs[name] = int(kwargs[name])
         if backend_options is not None and not isinstance(backend_options, dict):
             raise TypeError(f"backend_options must be a dict, got "
                             f"{type(backend_options).__name__}")

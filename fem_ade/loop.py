@@ -61,6 +61,7 @@ import math
 import time
 from dataclasses import dataclass, field
 
+import numpy as np
 from tqdm.auto import tqdm
 
 from .backend import Backend
@@ -491,6 +492,9 @@ def run_loop(
     """
     if (steps is None) == (until_steady is None):
         raise ModelError("give exactly one of steps and until_steady")
+    if start is None and (isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating))
+                          or not math.isfinite(dt) or dt <= 0):
+        raise ModelError(f"dt must be a positive number, got {dt!r}")
     if accelerate and adaptive is not None:
         raise ModelError("--accelerate and --adaptive do not go together (momentum needs a "
                          "fixed step map)")

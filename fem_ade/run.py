@@ -286,6 +286,10 @@ def _main(argv, scratch: str | None = None) -> int:
     writes what rank 0 writes into the run folder."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    try:
+        os.getcwd()
+    except OSError:
+        return _error("the working directory no longer exists")
     if args.list:
         print(list_scenes())
         return 0
@@ -314,7 +318,7 @@ def _main(argv, scratch: str | None = None) -> int:
             return _error(str(err))
         except WriteFailed as err:
             return _failed(str(err))
-        return _report(scene, config.backend, result, args.resume)
+        return _printed(lambda: _report(scene, config.backend, result, args.resume))
     if args.scene is None:
         from .scenes import SCENES
 
@@ -381,9 +385,33 @@ def _main(argv, scratch: str | None = None) -> int:
     except WriteFailed as err:
         return _failed(str(err))
     if args.dry_run:
-        print(f"fem_ade.run: would run {result}")
-        return 0
-    return _report(scene, args.backend, result, out)
+        return _printed(lambda: print(f"fem_ade.run: would run {result}"), 0)
+    return _printed(lambda: _report(scene, args.backend, result, out))
+
+
+def _printed(report, code: int | None = None) -> int:
+    """Run ``report`` (which prints and returns the exit code); a stdout that is a full
+    device or a closed pipe costs the report, not a traceback (the run folder is written
+    already): exit 3 with one line on stderr, or quietly for a closed pipe."""
+    try:
+        result = report()
+        sys.stdout.flush()
+    except BrokenPipeError:
+        try:
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (no more writes to the pipe)
+            print("fem_ade.run: error: the report's reader went away (a closed pipe); the "
+                  "run folder is written", file=sys.stderr)
+        except OSError:
+            pass
+        return EXIT_FAILED
+    except OSError as err:
+        try:
+            print(f"fem_ade.run: error: cannot write the report: {err.strerror or err}",
+                  file=sys.stderr)
+        except OSError:
+            pass
+        return EXIT_FAILED
+    return result if code is None else code
 
 
 def backend_options(args) -> dict:

@@ -140,6 +140,14 @@ def simulate(
     description instead of running.
     """
     scene = _scene_argument(scene)
+    if config is not None:
+        if not isinstance(config, RunConfig):
+            raise TypeError(f"config must be a fem_ade.config.RunConfig, got "
+                            f"{type(config).__name__}")
+        given = _run_keywords_given(locals())
+        if given:
+            raise ModelError(f"give config or the run's keywords, not both: {', '.join(given)} "
+                             "would be ignored (config.with_(...) changes a configuration)")
     if monitor is not None and not callable(monitor):
         raise TypeError(f"monitor must be callable (backend, row), got "
                         f"{type(monitor).__name__}")
@@ -190,6 +198,22 @@ def simulate(
         return _execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)
     finally:
         lock.release()
+
+
+#: simulate's keywords that a RunConfig holds (with ``config=``, none may be given)
+_RUN_KEYWORDS = ("backend", "n", "dt", "steps", "until_steady", "max_steps", "every", "ic",
+                 "perturb", "seed", "scheme", "constraints", "adaptive", "accelerate",
+                 "checkpoint_every", "save_every", "shape_every", "render",
+                 "backend_options")
+
+
+def _run_keywords_given(values: dict) -> list[str]:
+    """The run keywords of a simulate call that differ from their defaults."""
+    import inspect
+
+    defaults = {k: p.default for k, p in inspect.signature(simulate).parameters.items()}
+    return [k for k in _RUN_KEYWORDS if values[k] is not defaults[k]
+            and values[k] != defaults[k]]
 
 
 def _real(value) -> bool:

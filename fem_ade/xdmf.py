@@ -129,12 +129,25 @@ class XdmfSeries:
         return self.path.with_name(f"{self.path.stem}-{step:08d}.h5")
 
     def _atomic_h5(self, path: Path, arrays: dict, attrs: dict) -> None:
+        """One HDF5 file, whole or not at all. HDF5 reports a write the file system refuses
+        (no space, a file-size limit) as OSError and then, closing the file, RuntimeError:
+        both become the OSError of a failed write (the run's WriteFailed, exit 3)."""
+        import errno as errno_
+
         tmp = path.with_name(path.stem + ".tmp.h5")
-        with self._h5py.File(tmp, "w") as f:
-            for name, value in arrays.items():
-                f.create_dataset(name, data=value)
-            for name, value in attrs.items():
-                f.attrs[name] = value
+        try:
+            with self._h5py.File(tmp, "w") as f:
+                for name, value in arrays.items():
+                    f.create_dataset(name, data=value)
+                for name, value in attrs.items():
+                    f.attrs[name] = value
+        except (OSError, RuntimeError) as err:
+            tmp.unlink(missing_ok=True)
+            text = str(err)
+            code = next((c for c in (errno_.EFBIG, errno_.ENOSPC, errno_.EDQUOT, errno_.EIO)
+                         if f"errno = {c}," in text), getattr(err, "errno", None))
+            reason = os.strerror(code) if code else " ".join(text.split())[:120]
+            raise OSError(code or errno_.EIO, reason, str(tmp)) from None
         os.replace(tmp, path)
 
     def _mesh_intact(self) -> bool:

@@ -391,3 +391,101 @@ def test_fuzz_cli_runs(tmp_path_factory, capsys, option, value):
     if code == 3:
         first = (out / "history.csv").read_text().splitlines()[1].split(",")
         assert all(math.isfinite(float(v)) for v in first)
+
+
+# --- issue 31: what ended in a traceback, ran on without a word or did not end ------------
+def _mesh_variant(tmp_path, kind):
+    import meshio
+
+    m = meshio.read(Path(__file__).resolve().parents[1] / "meshes" / "box12_uniform.vtu")
+    points, cells = m.points.copy(), m.cells[0].data.copy()
+    if kind == "index out of range":
+        cells[0, 0] = len(points) + 5
+    elif kind == "duplicated cell":
+        cells = np.vstack([cells, cells[:1]])
+    elif kind == "shifted":
+        points = points + 0.25
+    path = tmp_path / f"{kind.replace(' ', '_')}.vtu"
+    meshio.write(path, meshio.Mesh(points, [("hexahedron", cells)]))
+    return path
+
+
+@pytest.mark.parametrize("case", ["FEM_ADE_FFT_WORKERS=abc", "FEM_ADE_FFT_WORKERS=0",
+                                  "rtol 1e-300", "index out of range", "duplicated cell",
+                                  "shifted"])
+def test_run_mistakes_are_one_line_and_write_nothing(tmp_path, capsys, monkeypatch, case):
+    out = tmp_path / "out"
+    args = ["discocyte", *SMALL, "--steps", "2", "--out", out]
+    if case.startswith("FEM_ADE"):
+        monkeypatch.setenv("FEM_ADE_FFT_WORKERS", case.split("=")[1])
+        args += ["--backend", "spectral"]
+    elif case == "rtol 1e-300":
+        args += ["--solver", "jacobi", "--rtol", "1e-300"]
+    else:
+        args = ["discocyte", "--mesh", _mesh_variant(tmp_path, case), "--allow-underresolved",
+                "--quiet", "--no-render", "--steps", "2", "--out", out]
+    code, _, err = cli(args, capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("case", ["full device", "closed pipe", "deleted directory",
+                                  "file-size limit"])
+def test_run_environment_failures_are_one_line(tmp_path, case):
+    """Output to a full device or a closed pipe after the run, a working directory that is
+    gone, a file-size limit at the first phi.h5: one line on stderr, exit 2 or 3, no
+    traceback (the run folder, where one was begun, keeps what it could)."""
+    import resource
+
+    cmd = [sys.executable, "-m", "fem_ade.run", "discocyte", "--backend", "spectral",
+           "--n", "48", "--allow-underresolved", "--quiet", "--no-render", "--steps", "2",
+           "--out", str(tmp_path / "out")]
+    kwargs = {"stderr": subprocess.PIPE, "text": True, "timeout": 300}
+    if case == "full device":
+        if not Path("/dev/full").exists():
+            pytest.skip("no /dev/full")
+        with open("/dev/full", "w") as full:
+            r = subprocess.run(cmd, stdout=full, **kwargs)
+    elif case == "closed pipe":
+        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        p.stdout.close()  # nobody reads the report
+        _, err = p.communicate(timeout=300)
+        r = subprocess.CompletedProcess(cmd, p.returncode, None, err)
+    elif case == "deleted directory":
+        gone = tmp_path / "gone"
+        gone.mkdir()
+        r = subprocess.run(["/bin/sh", "-c", f"cd {gone} && rmdir {gone} && "
+                            + " ".join(cmd[:-2] + ["--dry-run"])], stdout=subprocess.PIPE,
+                           **kwargs)
+    else:
+        def limit():
+            resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))
+        r = subprocess.run(cmd, stdout=subprocess.PIPE, preexec_fn=limit, **kwargs)
+    assert r.returncode in (2, 3) and "Traceback" not in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_api_mistakes(tmp_path):
+    """The Python API: numpy integers are integers; config with the run's keywords, a dict as
+    config, no scene, n = 0 and a negative dt are clear errors."""
+    from fem_ade import get_scene, simulate
+    from fem_ade.backend import make_backend
+    from fem_ade.config import RunConfig
+    from fem_ade.loop import run_loop
+    from fem_ade.model import ModelError
+
+    scene = get_scene("discocyte")
+    r = simulate(scene, backend="spectral", n=np.int64(16), steps=np.int64(2),
+                 allow_underresolved=True)
+    assert r.status == "completed" and r.steps == 2
+    config = RunConfig.build(scene, backend="spectral", n=16, steps=2)
+    with pytest.raises(ModelError, match="not both: n, steps"):
+        simulate(scene, config=config, n=64, steps=7)
+    with pytest.raises(TypeError, match="RunConfig"):
+        simulate(scene, config={})
+    with pytest.raises(TypeError, match="Scene"):
+        RunConfig.build(None)
+    with pytest.raises(ModelError, match="positive integer"):
+        make_backend("fem", scene, n=0)
+    with pytest.raises(ModelError, match="dt must be"):
+        run_loop(make_backend("spectral", scene, n=16), dt=-1, steps=2)

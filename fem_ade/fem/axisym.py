@@ -339,8 +339,9 @@ class AxisymmetricFEMBackend(FEMBackend):
         if rtol is not None and (solver in ("auto", *EXACT)):
             raise ModelError("--rtol sets the tolerance of the PCG solvers (amg, chebyshev, "
                              "jacobi); this run solves each step exactly (fdm)")
-        if rtol is not None and not (isinstance(rtol, float | int) and 0 < rtol < 1):
-            raise ModelError(f"--rtol must be a number in (0, 1), got {rtol}")
+        if rtol is not None and not (isinstance(rtol, float | int) and 1e-14 <= rtol < 1):
+            raise ModelError(f"--rtol must be a number in [1e-14, 1) (below it round-off "
+                             f"never lets PCG stop), got {rtol}")
         axis_of(scene)  # a seeded start's shape is checked when it is built (seeded_axis)
         parse_mesh(mesh)
         R, z0, z1 = parse_domain(domain, scene.params.L)

@@ -155,8 +155,9 @@ class FEMBackend(BackendBase):
                              f"got {order!r}")
         check_choice("FEM solver", solver, FEM_SOLVERS)
         check_choice("linear algebra (--linalg)", linalg, LINALGS)
-        if rtol is not None and not (isinstance(rtol, float | int) and 0 < rtol < 1):
-            raise ModelError(f"--rtol must be a number in (0, 1), got {rtol}")
+        if rtol is not None and not (isinstance(rtol, float | int) and 1e-14 <= rtol < 1):
+            raise ModelError(f"--rtol must be a number in [1e-14, 1) (below it round-off "
+                             f"never lets PCG stop), got {rtol}")
         kind, _ = fmesh.parse_option(mesh)
         tensor = kind in ("uniform", "graded")
         if not tensor and order not in FILE_MESH_ORDERS:

@@ -229,10 +229,23 @@ def from_file(path: str | Path, dim: int = 3, L: float | None = None) -> Periodi
             f"found {sorted(kinds)}"
         )
     points = np.asarray(mio.points)[:, :dim]
-    mio = meshio.Mesh(points, [(want, np.vstack([c.data for c in mio.cells]))])
-    with _quiet_skfem():
-        mesh = from_meshio(mio)
+    cells = np.vstack([c.data for c in mio.cells])
+    if cells.size == 0 or cells.min() < 0 or cells.max() >= len(points):
+        raise ModelError(f"mesh {path.name}: a cell refers to a point it does not have "
+                         f"(indices {cells.min()}..{cells.max()}, {len(points)} points)")
+    if len(np.unique(np.sort(cells, axis=1), axis=0)) != len(cells):
+        raise ModelError(f"mesh {path.name} lists a cell twice (a duplicated cell counts its "
+                         "volume twice)")
+    mio = meshio.Mesh(points, [(want, cells)])
+    try:
+        with _quiet_skfem():
+            mesh = from_meshio(mio)
+    except (ValueError, IndexError) as err:
+        raise ModelError(f"cannot use mesh {path.name}: {err}") from None
     lo, hi = mesh.p.min(axis=1), mesh.p.max(axis=1)
+    if not np.allclose(lo, 0.0, atol=1e-9 * max(float(np.max(hi - lo)), 1e-300)):
+        raise ModelError(f"mesh {path.name} starts at {np.round(lo, 6).tolist()}: the periodic "
+                         "box is [0, L]^dim (shift the mesh)")
     ext = hi - lo
     if L is not None and not np.allclose(ext, L, rtol=1e-6, atol=0):
         raise ModelError(
