@@ -125,6 +125,44 @@ def bending_explicit(phi, mu, *, kappa, eps, C):
 
 
 # ---------------------------------------------------------------------------------------------
+# linearizations: the directional derivative of each (a, c) above along v (μ_v = W⁻¹Kv), for
+# the exact Hessian-vector products of Newton's method (fem_ade.fem.newton)
+# ---------------------------------------------------------------------------------------------
+def bending_explicit_linear(phi, mu, v, mu_v, *, kappa, eps, C):
+    """d/dt of :func:`bending_explicit` at φ + tv (μ + tμ_v): (a′, c′)."""
+    phi2 = phi * phi
+    a = (3.0 / eps) * phi2 * v
+    c = (3.0 / eps) * (2.0 * phi * v * mu + phi2 * mu_v)
+    # P(φ) = (3φ² + 2Cεφ − 1)(φ² − 1)(φ + Cε): P′ by the product rule
+    p1, p2, p3 = 3.0 * phi2 + 2.0 * C * eps * phi - 1.0, phi2 - 1.0, phi + C * eps
+    dP = (6.0 * phi + 2.0 * C * eps) * p2 * p3 + p1 * 2.0 * phi * p3 + p1 * p2
+    c += dP * v / eps**3
+    if C != 0.0:
+        a += 2.0 * C * phi * v
+        c += 2.0 * C * (v * mu + phi * mu_v)
+    return kappa * a, kappa * c
+
+
+def area_difference_gradient_linear(phi, mu, v, mu_v, eps, coef):
+    """d/dt of :func:`area_difference_gradient` at fixed ``coef``: (a′, c′)."""
+    phi2 = phi * phi
+    a = coef * 2.0 * phi * v
+    c = coef * (2.0 * (v * mu + phi * mu_v) + (1.0 / eps**2) * (-12.0 * phi
+                                                                 + 20.0 * phi2 * phi) * v)
+    return a, c
+
+
+def area_gradient_linear(phi, v, eps, coef=AREA_FACTOR):
+    """d/dt of :func:`area_gradient`: (s, c′) with the K part s·v."""
+    return coef * eps, coef / eps * (3.0 * phi * phi - 1.0) * v
+
+
+def volume_gradient_linear(phi, v, localized=False):
+    """d/dt of :func:`volume_gradient`: c′ (0 for the paper's V)."""
+    return -1.5 * phi * v if localized else 0.0 * v
+
+
+# ---------------------------------------------------------------------------------------------
 # the explicit terms at quadrature points (w.phi, w.mu are interpolated fields)
 # ---------------------------------------------------------------------------------------------
 @LinearForm

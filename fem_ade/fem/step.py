@@ -124,6 +124,45 @@ class MixedStep:
         s, c = forms.area_gradient(u, self.params.eps)
         return s * Ku + self.w * c
 
+    # -- derivatives (Newton's method: fem_ade.fem.newton) ------------------------------------
+    def gradient(self, phi, mu, Kphi) -> np.ndarray:
+        """∇E_h(φ): the exact gradient of the discrete energy (minus :meth:`descent`)."""
+        a, c, _ = self.explicit_parts(phi, mu, Kphi)
+        return -self.descent(phi, mu, a, c)
+
+    def hessian_vector(self, phi, mu, Kphi, v) -> np.ndarray:
+        """∇²E_h(φ) v, exactly: the derivative of :meth:`gradient` along v. Every term's
+        linearization (:mod:`fem_ade.fem.forms`), the ADE term's rank-one part
+        G″·(∇ΔA·v)∇ΔA included; the penalties' terms where their effects are on."""
+        p = self.params
+        mu_v = self.space.laplacian(v)
+        A, dA, V = self.values(phi, mu, Kphi)
+        a, c = forms.bending_explicit_linear(phi, mu, v, mu_v, kappa=p.kappa, eps=p.eps,
+                                             C=p.C_eff)
+        if dA is not None:
+            a2, c2 = forms.area_difference_gradient_linear(phi, mu, v, mu_v, p.eps,
+                                                           p.ade_force_coefficient(dA))
+            a, c = a + a2, c + c2
+        if A is not None:
+            s, c2 = forms.area_gradient_linear(phi, v, p.eps, p.area_force_scale(A))
+            a, c = a + s * v, c + c2
+        if V is not None:
+            c = c + p.volume_slope(V) * forms.volume_gradient_linear(phi, v,
+                                                                   p.localized_volume)
+        Hv = self.K @ (a - (2.0 * p.kappa / p.eps) * v + (p.kappa * p.eps) * mu_v) \
+            + self.w * c
+        for sigma, b in self.rank_one(phi, mu, Kphi, A, dA, V):  # the functionals' slopes
+            Hv = Hv + sigma * _dot(b, v) * b
+        return Hv
+
+    def constraint_hessian_vector(self, phi, Kphi, v, lam_V, lam_A) -> np.ndarray:
+        """(λ_V ∇²V_h + λ_A ∇²A_h) v: the exact constraints' part of the Lagrangian's
+        Hessian."""
+        p = self.params
+        out = lam_V * self.w * forms.volume_gradient_linear(phi, v, p.localized_volume)
+        s, c = forms.area_gradient_linear(phi, v, p.eps)
+        return out + lam_A * (s * (self.K @ v) + self.w * c)
+
     # -- the explicit side ------------------------------------------------------------------
     def explicit_parts(self, phi, mu, Kphi):
         """(a, c, (A, ΔA, V)) with ⟨Rⁿ, v⟩ = K a + W c: the nodal products of every term."""

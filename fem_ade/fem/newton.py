@@ -1,0 +1,241 @@
+"""Steady states by Newton's method: the discrete Euler–Lagrange equations of E_h with V = α
+and A = β held exactly, solved by Newton–Krylov on a FEM backend with a tensor space.
+
+A steady state of the gradient flow is a stationary point of the Lagrangian
+
+    L(φ, λ) = E_h(φ) + λ_V (V_h(φ) − α) + λ_A (A_h(φ) − β) + λ_T T(φ),
+
+and Newton's method goes to it directly: each iteration solves the bordered system
+
+    [ H_L  C ] [δφ]     [ ∇_φ L ]
+    [ Cᵀ   0 ] [δλ] = − [ c(φ)  ],     C = (∇V_h, ∇A_h, ∇T),
+
+by MINRES (:func:`scipy.sparse.linalg.minres`, which takes an indefinite H_L: saddles too),
+preconditioned by diag(P, CᵀP⁻¹C) with P = (4κ/ε³)W + (4κ/ε)K + κε KW⁻¹K — the Hessian of
+E_h in the bulk phases (φ = ±1, P′(φ) = 2), SPD, and inverted exactly by the space's fast
+diagonalization. H_L·v is exact: every term's linearization
+(:meth:`fem_ade.fem.step.MixedStep.hessian_vector`, checked against finite differences of
+the gradient to 1e-9). T = Σ wᵢ zᵢ φᵢ pins the translation along z that the energy of an
+axisymmetric run does not see (it would make H_L singular; its multiplier is 0 at a
+solution). The step is halved until E falls by 1e-4 of the Newton decrement, once V and A are
+restored along P⁻¹∇V, P⁻¹∇A; it stops when the decrement |∇Lᵀδφ|/|E| — the energy the next
+step would still gain — is below ``tol``: a steady state by a residual criterion, where the
+gradient flow stops on its energy's change per step.
+
+What it costs (the prolate at v = 0.8 from the flow's 1e-9 stop, order 8, 2.5 nodes per ε):
+at ε = 0.01, 4 iterations of 95–170 MINRES iterations; at ε = 0.005, 10 of 180–500 (E to
+3e-10 of the flow run to a change of 1e-12 per step, in 3× its time). MINRES needs ~R/ε
+iterations: P treats the membrane's shape modes, whose Hessian eigenvalues are the sharp
+bending energy's, as bulk modes of eigenvalue 4κ/ε³ — a coarse space of interface
+displacements would be the cure. So Newton is the tool for exact steady states and for
+continuation at moderate ε (fem_ade's branches), not a faster road to the smallest ε.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..model import ModelError
+from . import forms
+from .solve import Eigenbasis, StepMatrix, _dot
+
+
+class NewtonError(ArithmeticError):
+    """Newton's method did not converge from this state."""
+
+
+@dataclass
+class NewtonResult:
+    """What :func:`solve_steady` did: ``converged``, ``iterations``, ``krylov`` (MINRES
+    iterations per Newton step), ``decrement`` and ``violation`` per iteration (before its
+    step), ``E``, the multipliers ``lambda_V``, ``lambda_A``, the seconds it took."""
+
+    converged: bool
+    iterations: int
+    E: float
+    lambda_V: float
+    lambda_A: float
+    krylov: list[int] = field(default_factory=list)
+    decrement: list[float] = field(default_factory=list)
+    violation: list[float] = field(default_factory=list)
+    seconds: float = 0.0
+    message: str = ""
+
+
+class NewtonSystem:
+    """The pieces of the bordered Newton system on an FEM backend (module docstring)."""
+
+    def __init__(self, be):
+        if getattr(be, "exact", False) is not True:
+            raise ModelError("Newton's method solves for steady states with exact constraints "
+                             "(--constraints exact)")
+        space = be.space
+        if getattr(space, "axes", None) is None:
+            raise ModelError("Newton's method needs a tensor mesh (its preconditioner is the "
+                             "fast diagonalization)")
+        self.be, self.space, self.step = be, space, be.stepper
+        self.params = p = be.params
+        self.w = space.weights
+        basis = be.stepper.eigenbasis or Eigenbasis(space, False)
+        self.basis = basis
+        P = StepMatrix(4.0 * p.kappa / p.eps**3, 4.0 * p.kappa / p.eps, p.kappa * p.eps)
+        self.P_inverse_symbol = basis.inverse(P)
+        self.translations = self._translations()
+
+    # -- the functionals ---------------------------------------------------------------------
+    def _translations(self) -> list[np.ndarray]:
+        """Gradients of the linear functionals that pin the translations: z in the
+        axisymmetric geometry (none elsewhere: a periodic box's translations are left to the
+        Krylov solver, which is started from 0 and sees none of them in the right side)."""
+        if getattr(self.be, "geometry", "cartesian") == "axisymmetric":
+            z = self.space.doflocs[1]
+            return [self.w * (z - float(np.sum(self.w * z) / np.sum(self.w)))]
+        return []
+
+    def fields(self, phi):
+        mu = self.space.laplacian(phi)
+        return mu, self.w * mu
+
+    def gradient(self, phi, mu=None, Kphi=None) -> np.ndarray:
+        """∇E_h(φ) (minus the step's descent direction)."""
+        if mu is None:
+            mu, Kphi = self.fields(phi)
+        return self.step.gradient(phi, mu, Kphi)
+
+    def constraint_gradients(self, phi, Kphi) -> list[np.ndarray]:
+        return [self.step.volume_gradient(phi), self.step.area_gradient(phi, Kphi),
+                *self.translations]
+
+    def constraint_values(self, phi, Kphi) -> np.ndarray:
+        """(V − α, A − β) at φ (the translations' rows: 0, they are kept where they are)."""
+        p = self.params
+        V = forms.volume(phi, self.w, p.localized_volume)
+        A = forms.area(phi, Kphi, self.w, p.eps)
+        return np.array([V - p.alpha, A - p.beta] + [0.0] * len(self.translations))
+
+    def restore(self, phi, tol: float = 1e-13, steps: int = 8):
+        """φ moved along P⁻¹∇V and P⁻¹∇A until V = α and A = β (Newton on the 2×2 system),
+        or None if that does not converge."""
+        p = self.params
+        mu, Kphi = self.fields(phi)
+        d = [self.P_inverse(c) for c in self.constraint_gradients(phi, Kphi)[:2]]
+        Kd = [self.w * self.space.laplacian(x) for x in d]
+        ab = np.zeros(2)
+        for _ in range(steps):
+            u = phi + ab[0] * d[0] + ab[1] * d[1]
+            Ku = Kphi + ab[0] * Kd[0] + ab[1] * Kd[1]
+            V = forms.volume(u, self.w, p.localized_volume)
+            A = forms.area(u, Ku, self.w, p.eps)
+            r = np.array([V - p.alpha, A - p.beta])
+            if abs(r[0]) <= tol * p.alpha and abs(r[1]) <= tol * p.beta:
+                return u
+            gV, gA = self.step.volume_gradient(u), self.step.area_gradient(u, Ku)
+            J = np.array([[_dot(gV, d[0]), _dot(gV, d[1])], [_dot(gA, d[0]), _dot(gA, d[1])]])
+            try:
+                ab -= np.linalg.solve(J, r)
+            except np.linalg.LinAlgError:
+                return None
+        u = phi + ab[0] * d[0] + ab[1] * d[1]
+        return u if np.all(np.isfinite(u)) else None
+
+    # -- linear algebra ----------------------------------------------------------------------
+    def P_inverse(self, x: np.ndarray) -> np.ndarray:
+        return self.basis.apply(np.asarray(x)[None], self.P_inverse_symbol)[0]
+
+    def multipliers(self, g: np.ndarray, C: list[np.ndarray]) -> np.ndarray:
+        """The λ that minimise ‖∇E + Cλ‖ in the P⁻¹ norm."""
+        PC = [self.P_inverse(c) for c in C]
+        G = np.array([[_dot(ci, pj) for pj in PC] for ci in C])
+        return np.linalg.solve(G, [-_dot(g, pj) for pj in PC])
+
+
+def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
+                 max_halvings: int = 10, inner_tol: float = 1e-8,
+                 quiet: bool = True) -> NewtonResult:
+    """Newton's method from the backend's current state to a steady state with V = α and
+    A = β exactly (module docstring). Each iteration: the bordered system by MINRES (its
+    preconditioned residual below ``inner_tol``), then the step, halved until E falls by at
+    least 1e-4 of the Newton decrement once the constraints are restored along P⁻¹∇V,
+    P⁻¹∇A (Armijo; a full step where the quadratic model holds). Stops when the decrement
+    is below ``tol``·|E|. The backend is left at the last state reached (its field, with
+    φⁿ⁻¹ cleared); :class:`NewtonResult` says whether it converged."""
+    from scipy.sparse.linalg import LinearOperator, minres
+
+    t0 = time.perf_counter()
+    sys_ = NewtonSystem(be)
+    step = sys_.step
+    phi = sys_.restore(be.phi.copy())
+    if phi is None:
+        raise NewtonError("the state is too far from V = alpha, A = beta to restore them")
+    N = phi.size
+    result = NewtonResult(False, 0, math.nan, math.nan, math.nan)
+    for it in range(max_iterations + 1):
+        mu, Kphi = sys_.fields(phi)
+        E = step.diagnostics(phi, mu, Kphi)["E"]
+        C = sys_.constraint_gradients(phi, Kphi)
+        g = sys_.gradient(phi, mu, Kphi)
+        lam = sys_.multipliers(g, C)
+        gL = g + sum(lj * cj for lj, cj in zip(lam, C, strict=True))
+        viol = sys_.constraint_values(phi, Kphi)
+        m = len(C)
+        PC = [sys_.P_inverse(c) for c in C]
+        S_inv = np.linalg.inv(np.array([[_dot(ci, pj) for pj in PC] for ci in C]))
+
+        def kkt(x, phi=phi, mu=mu, Kphi=Kphi, lam=lam, C=C):
+            v, nu = x[:N], x[N:]
+            top = (step.hessian_vector(phi, mu, Kphi, v)
+                   + step.constraint_hessian_vector(phi, Kphi, v, lam[0], lam[1]))
+            for nj, cj in zip(nu, C, strict=True):
+                top = top + nj * cj
+            return np.concatenate([top, [_dot(c, v) for c in C]])
+
+        def prec(x, S_inv=S_inv):
+            return np.concatenate([sys_.P_inverse(x[:N]), S_inv @ x[N:]])
+
+        its = [0]
+
+        def count(_x, its=its):
+            its[0] += 1
+
+        x, _ = minres(LinearOperator((N + m, N + m), matvec=kkt, dtype=float),
+                      -np.concatenate([gL, viol]),
+                      M=LinearOperator((N + m, N + m), matvec=prec, dtype=float),
+                      rtol=inner_tol, maxiter=5000, callback=count)
+        dphi = x[:N]
+        decrement = abs(_dot(gL, dphi)) / max(abs(E), 1e-300)
+        result.krylov.append(its[0])
+        result.decrement.append(decrement)
+        result.violation.append(float(np.max(np.abs(viol[:2]) / np.array(
+            [sys_.params.alpha, sys_.params.beta]))))
+        result.E, result.lambda_V, result.lambda_A = E, float(lam[0]), float(lam[1])
+        if not quiet:
+            print(f"  newton {it}: E = {E:.13g}, decrement {decrement:.2e}, MINRES {its[0]}",
+                  flush=True)
+        if decrement <= tol:
+            result.converged = True
+            break
+        if it == max_iterations:
+            break
+        s = 1.0
+        for _ in range(max_halvings + 1):
+            trial = sys_.restore(phi + s * dphi)
+            if trial is not None:
+                E_t = step.diagnostics(trial, *sys_.fields(trial))["E"]
+                if math.isfinite(E_t) and E_t <= E - 1e-4 * s * decrement * abs(E):
+                    break
+            s *= 0.5
+        else:
+            result.message = (f"Newton step {it} does not lower the energy even at "
+                              f"2^-{max_halvings} of its length")
+            break
+        phi = trial
+        result.iterations = it + 1
+    be._set(phi, None)
+    result.seconds = time.perf_counter() - t0
+    if not result.converged and not result.message:
+        result.message = f"not converged in {max_iterations} Newton iterations"
+    return result
