@@ -78,13 +78,18 @@ class NewtonSystem:
             raise ModelError("Newton's method needs a tensor mesh (its preconditioner is the "
                              "fast diagonalization)")
         self.be, self.space, self.step = be, space, be.stepper
-        self.params = p = be.params
+        p = be.params
         self.w = space.weights
         basis = be.stepper.eigenbasis or Eigenbasis(space, False)
         self.basis = basis
         P = StepMatrix(4.0 * p.kappa / p.eps**3, 4.0 * p.kappa / p.eps, p.kappa * p.eps)
         self.P_inverse_symbol = basis.inverse(P)
         self.translations = self._translations()
+
+    @property
+    def params(self):
+        """The parameters the backend runs now (continuation changes them)."""
+        return self.step.params
 
     # -- the functionals ---------------------------------------------------------------------
     def _translations(self) -> list[np.ndarray]:
@@ -153,6 +158,64 @@ class NewtonSystem:
         return np.linalg.solve(G, [-_dot(g, pj) for pj in PC])
 
 
+@dataclass
+class Linearization:
+    """The Newton system at φ: its fields, E, the constraints' gradients C and values, the
+    least-squares multipliers λ, the Lagrangian's gradient ∇L = ∇E + Cλ."""
+
+    phi: np.ndarray
+    mu: np.ndarray
+    Kphi: np.ndarray
+    E: float
+    C: list
+    lam: np.ndarray
+    grad: np.ndarray
+    violation: np.ndarray
+
+
+def linearize(sys_: NewtonSystem, phi: np.ndarray) -> Linearization:
+    mu, Kphi = sys_.fields(phi)
+    E = sys_.step.diagnostics(phi, mu, Kphi)["E"]
+    C = sys_.constraint_gradients(phi, Kphi)
+    g = sys_.gradient(phi, mu, Kphi)
+    lam = sys_.multipliers(g, C)
+    grad = g + sum(lj * cj for lj, cj in zip(lam, C, strict=True))
+    return Linearization(phi, mu, Kphi, E, C, lam, grad, sys_.constraint_values(phi, Kphi))
+
+
+def kkt_solve(sys_: NewtonSystem, lin: Linearization, rhs: np.ndarray,
+              inner_tol: float = 1e-8) -> tuple[np.ndarray, int]:
+    """x with [[H_L, C], [Cᵀ, 0]] x = rhs (length N + len(C)) by MINRES, preconditioned by
+    diag(P, CᵀP⁻¹C) (module docstring); (x, MINRES iterations)."""
+    from scipy.sparse.linalg import LinearOperator, minres
+
+    step, C = sys_.step, lin.C
+    N, m = lin.phi.size, len(C)
+    PC = [sys_.P_inverse(c) for c in C]
+    S_inv = np.linalg.inv(np.array([[_dot(ci, pj) for pj in PC] for ci in C]))
+
+    def kkt(x):
+        v, nu = x[:N], x[N:]
+        top = (step.hessian_vector(lin.phi, lin.mu, lin.Kphi, v)
+               + step.constraint_hessian_vector(lin.phi, lin.Kphi, v, lin.lam[0], lin.lam[1]))
+        for nj, cj in zip(nu, C, strict=True):
+            top = top + nj * cj
+        return np.concatenate([top, [_dot(c, v) for c in C]])
+
+    def prec(x):
+        return np.concatenate([sys_.P_inverse(x[:N]), S_inv @ x[N:]])
+
+    its = [0]
+
+    def count(_x):
+        its[0] += 1
+
+    x, _ = minres(LinearOperator((N + m, N + m), matvec=kkt, dtype=float), rhs,
+                  M=LinearOperator((N + m, N + m), matvec=prec, dtype=float), rtol=inner_tol,
+                  maxiter=5000, callback=count)
+    return x, its[0]
+
+
 def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
                  max_halvings: int = 10, inner_tol: float = 1e-8,
                  quiet: bool = True) -> NewtonResult:
@@ -163,8 +226,6 @@ def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
     P⁻¹∇A (Armijo; a full step where the quadratic model holds). Stops when the decrement
     is below ``tol``·|E|. The backend is left at the last state reached (its field, with
     φⁿ⁻¹ cleared); :class:`NewtonResult` says whether it converged."""
-    from scipy.sparse.linalg import LinearOperator, minres
-
     t0 = time.perf_counter()
     sys_ = NewtonSystem(be)
     step = sys_.step
@@ -174,46 +235,19 @@ def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
     N = phi.size
     result = NewtonResult(False, 0, math.nan, math.nan, math.nan)
     for it in range(max_iterations + 1):
-        mu, Kphi = sys_.fields(phi)
-        E = step.diagnostics(phi, mu, Kphi)["E"]
-        C = sys_.constraint_gradients(phi, Kphi)
-        g = sys_.gradient(phi, mu, Kphi)
-        lam = sys_.multipliers(g, C)
-        gL = g + sum(lj * cj for lj, cj in zip(lam, C, strict=True))
-        viol = sys_.constraint_values(phi, Kphi)
-        m = len(C)
-        PC = [sys_.P_inverse(c) for c in C]
-        S_inv = np.linalg.inv(np.array([[_dot(ci, pj) for pj in PC] for ci in C]))
-
-        def kkt(x, phi=phi, mu=mu, Kphi=Kphi, lam=lam, C=C):
-            v, nu = x[:N], x[N:]
-            top = (step.hessian_vector(phi, mu, Kphi, v)
-                   + step.constraint_hessian_vector(phi, Kphi, v, lam[0], lam[1]))
-            for nj, cj in zip(nu, C, strict=True):
-                top = top + nj * cj
-            return np.concatenate([top, [_dot(c, v) for c in C]])
-
-        def prec(x, S_inv=S_inv):
-            return np.concatenate([sys_.P_inverse(x[:N]), S_inv @ x[N:]])
-
-        its = [0]
-
-        def count(_x, its=its):
-            its[0] += 1
-
-        x, _ = minres(LinearOperator((N + m, N + m), matvec=kkt, dtype=float),
-                      -np.concatenate([gL, viol]),
-                      M=LinearOperator((N + m, N + m), matvec=prec, dtype=float),
-                      rtol=inner_tol, maxiter=5000, callback=count)
+        lin = linearize(sys_, phi)
+        E = lin.E
+        x, its = kkt_solve(sys_, lin, -np.concatenate([lin.grad, lin.violation]), inner_tol)
+        gL, viol, lam = lin.grad, lin.violation, lin.lam
         dphi = x[:N]
         decrement = abs(_dot(gL, dphi)) / max(abs(E), 1e-300)
-        result.krylov.append(its[0])
+        result.krylov.append(its)
         result.decrement.append(decrement)
         result.violation.append(float(np.max(np.abs(viol[:2]) / np.array(
             [sys_.params.alpha, sys_.params.beta]))))
         result.E, result.lambda_V, result.lambda_A = E, float(lam[0]), float(lam[1])
         if not quiet:
-            print(f"  newton {it}: E = {E:.13g}, decrement {decrement:.2e}, MINRES {its[0]}",
+            print(f"  newton {it}: E = {E:.13g}, decrement {decrement:.2e}, MINRES {its}",
                   flush=True)
         if decrement <= tol:
             result.converged = True

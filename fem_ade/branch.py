@@ -1,0 +1,576 @@
+"""Branches of steady states: pseudo-arclength continuation in one parameter, folds, and
+stability (issue 32), on the FEM with Newton's method (:mod:`fem_ade.fem.newton`).
+
+    python -m fem_ade.branch vesicle --branch prolate --eps 0.01 --param v --from 0.95 \\
+        --to 0.6 [--step 0.01] [--geometry axisymmetric] [--n N] [--order P] --out DIR
+
+A branch starts at ``--from``: the scene's seed run to a steady state by the ``steady``
+recipe's flow (to 1e-9 per step) and polished by Newton. Each further point is predicted
+along the branch's tangent (the secant of the last two points; at the first, the solution
+of the Newton system's parameter derivative) and corrected by Newton on the extended system
+
+    F(φ, p) = (∇_φ L, V − α, A − β) = 0,
+    θ ⟨t_φ, φ − φ_k⟩ + t_p (p − p_k) = Δs        (pseudo-arclength, Keller 1977),
+
+by bordering: two solves of the symmetric bordered system of
+:func:`fem_ade.fem.newton.kkt_solve` (for −F and for −∂F/∂p, the latter a central difference
+in p), the arclength row eliminated. ⟨·,·⟩ is the mean over the domain (Σ wᵢ xᵢ yᵢ / Σ wᵢ),
+and θ makes the first tangent's field and parameter parts equal. Δs halves where Newton does
+not converge in ``MAX_NEWTON`` iterations and grows by 1.5 where it takes ≤ 2, between
+``--step``/8 and 4·``--step``. A fold (turning point) is where the tangent's t_p changes
+sign; its parameter is the extremum of the quadratic through the three points around it.
+The branch ends at ``--to``, at a topology change (the shape's label leaves the branch's:
+an oblate opening into a torus, a neck closing) or where Δs falls below its least.
+
+Stability: at each point the few lowest eigenvalues of the Hessian of the Lagrangian on the
+constraints' tangent space, H_L v = λ P v with Cᵀv = 0 (LOBPCG, preconditioned by P⁻¹; P is
+Newton's bulk Hessian, so the count of negative λ — the unstable directions — is that of the
+constrained Hessian by Sylvester's law of inertia). In the axisymmetric geometry only
+axisymmetric directions are seen.
+
+Parameters (the ``vesicle`` family's, mapped to the model's with the seed's R₀ = √(β/4π)
+kept): ``v`` (α = (4π/3)R₀³v), ``da0`` (ΔA₀ = 8πDR₀·Δa₀), ``kbar`` (κ̄/κ), ``C``.
+
+The branch folder: ``points/NNNN/`` (``final.npz``: φ and its points; ``summary.json``: the
+point's parameter, E and its parts, V, A, ΔA, e = (W + G)/W_sphere, the φ = 0 surface's v
+and Δa, the label, the lowest eigenvalues and the unstable count, Newton's iterations),
+``branch.json`` (what the branch is: a resumed one must be the same), ``branch.csv`` (one
+row per point: the parameter, e, E, W, G, unstable, label, fold, ...), ``branch.png`` (e
+against the parameter: stable solid, unstable dashed, folds marked) and ``shapes.png``
+(the meridians). Killed and started again with the same command, a branch goes on from its
+last points.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from .model import ModelError
+
+PARAMETERS = ("v", "da0", "kbar", "C")
+#: Newton iterations before a step is taken again at half the arclength
+MAX_NEWTON = 8
+#: the lowest eigenvalues computed at each point (stability), LOBPCG's iterations for them,
+#: and the eigenvalue (in units of P, Newton's bulk Hessian) below which a direction counts as
+#: unstable (the shape modes' are 1e-4 … 1e-2 in these units)
+EIGENVALUES, STABILITY_ITS, UNSTABLE = 4, 300, -1e-6
+#: a Newton correction is converged when its decrement (relative energy) is below this
+NEWTON_TOL = 1e-12
+COLUMNS = ("point", "e", "E", "W", "G", "V", "A", "dA", "v_surface", "da_surface",
+           "unstable", "lowest_eigenvalue", "label", "fold", "newton", "seconds")
+
+
+# ---------------------------------------------------------------------------------------------
+# the parameter
+# ---------------------------------------------------------------------------------------------
+def get_parameter(params, name: str) -> float:
+    R0 = math.sqrt(params.beta / (4.0 * math.pi))
+    if name == "v":
+        return params.alpha / (4.0 / 3.0 * math.pi * R0**3)
+    if name == "da0":
+        return params.delta_A0 / (8.0 * math.pi * params.D * R0)
+    if name == "kbar":
+        return params.kappa_bar / params.kappa
+    return params.C
+
+
+def set_parameter(params, name: str, value: float):
+    """The parameters with ``name`` at ``value`` (R₀ = √(β/4π) kept)."""
+    R0 = math.sqrt(params.beta / (4.0 * math.pi))
+    if name == "v":
+        return params.with_(alpha=4.0 / 3.0 * math.pi * R0**3 * value)
+    if name == "da0":
+        return params.with_(delta_A0=8.0 * math.pi * params.D * R0 * value)
+    if name == "kbar":
+        return params.with_(kappa_bar=value * params.kappa)
+    return params.with_(C=value)
+
+
+def check_parameter(params, name: str) -> None:
+    if name not in PARAMETERS:
+        raise ModelError(f"--param must be one of {', '.join(PARAMETERS)}, got {name!r}")
+    if name in ("da0", "kbar") and not params.on("ade"):
+        raise ModelError(f"--param {name} moves the ADE term, which is off in this scene "
+                         "(the vesicle family: give --kbar and --da0)")
+    if name == "C" and not params.on("spontaneous_curvature"):
+        raise ModelError("--param C moves the spontaneous curvature, which is off in this "
+                         "scene (give --C, e.g. 0.0 is not on: use a small value)")
+
+
+# ---------------------------------------------------------------------------------------------
+# continuation
+# ---------------------------------------------------------------------------------------------
+class Continuation:
+    """The extended Newton system of one backend along one parameter (module docstring)."""
+
+    def __init__(self, be, name: str):
+        from .fem.newton import NewtonSystem
+
+        self.be, self.name = be, name
+        self.sys = NewtonSystem(be)
+        self.w = be.space.weights
+        self.volume = float(np.sum(self.w))
+        self.theta = 1.0
+
+    # the parameter as the backend runs it
+    @property
+    def p(self) -> float:
+        return get_parameter(self.be.stepper.params, self.name)
+
+    def set_p(self, value: float) -> None:
+        params = set_parameter(self.be.stepper.params, self.name, float(value))
+        self.be.stepper.params = params
+        self.be.params = params
+        self.be.scene = replace(self.be.scene, params=params)
+
+    def inner(self, a, b) -> float:
+        from .fem.solve import _dot
+
+        return _dot(self.w * a, b) / self.volume
+
+    def residual(self, phi, lam):
+        """F = (∇E + Cλ, V − α, A − β, 0) at φ and the current parameter, λ given."""
+        sys_ = self.sys
+        mu, Kphi = sys_.fields(phi)
+        C = sys_.constraint_gradients(phi, Kphi)
+        g = sys_.gradient(phi, mu, Kphi) + sum(lj * cj for lj, cj in zip(lam, C, strict=True))
+        return np.concatenate([g, sys_.constraint_values(phi, Kphi)])
+
+    def parameter_derivative(self, phi, lam, h: float | None = None) -> np.ndarray:
+        """∂F/∂p by a central difference in p (the model is polynomial in α, ΔA₀, κ̄, C)."""
+        p = self.p
+        h = h or 1e-6 * max(abs(p), 1.0)
+        self.set_p(p + h)
+        plus = self.residual(phi, lam)
+        self.set_p(p - h)
+        minus = self.residual(phi, lam)
+        self.set_p(p)
+        return (plus - minus) / (2.0 * h)
+
+    def tangent(self, phi) -> tuple[np.ndarray, float]:
+        """(t_φ, t_p) at a solution: t_φ = dφ/dp from the bordered system, normalized so
+        that θ⟨t_φ, t_φ⟩ + t_p² = 1 (θ set here, the first time, to make both parts equal)."""
+        from .fem.newton import kkt_solve, linearize
+
+        lin = linearize(self.sys, phi)
+        Fp = self.parameter_derivative(phi, lin.lam)
+        x, _ = kkt_solve(self.sys, lin, -Fp)
+        t_phi = x[:phi.size]
+        if self.theta == 1.0:
+            self.theta = 1.0 / max(self.inner(t_phi, t_phi), 1e-300)
+        norm = math.sqrt(self.theta * self.inner(t_phi, t_phi) + 1.0)
+        return t_phi / norm, 1.0 / norm
+
+    def correct(self, phi, p, anchor, tangent, ds):
+        """Newton on the extended system from the predicted (φ, p); (φ, p, iterations) or
+        None if it does not converge in :data:`MAX_NEWTON` iterations."""
+        from .fem.newton import kkt_solve, linearize
+
+        phi_k, p_k = anchor
+        t_phi, t_p = tangent
+        self.set_p(p)
+        for it in range(1, MAX_NEWTON + 1):
+            lin = linearize(self.sys, phi)
+            R = np.concatenate([lin.grad, lin.violation])
+            Fp = self.parameter_derivative(phi, lin.lam)
+            x1, _ = kkt_solve(self.sys, lin, -R)
+            x2, _ = kkt_solve(self.sys, lin, -Fp)
+            n = phi.size
+            g = self.theta * self.inner(t_phi, phi - phi_k) + t_p * (p - p_k) - ds
+            denom = self.theta * self.inner(t_phi, x2[:n]) + t_p
+            if denom == 0.0 or not math.isfinite(denom):
+                return None
+            dp = (-g - self.theta * self.inner(t_phi, x1[:n])) / denom
+            dphi = x1[:n] + dp * x2[:n]
+            phi, p = phi + dphi, p + dp
+            self.set_p(p)
+            if not np.all(np.isfinite(phi)) or np.max(np.abs(phi)) > 2.0:
+                return None
+            decrement = abs(self.inner(lin.grad, dphi)) * self.volume / max(abs(lin.E), 1e-300)
+            if decrement < NEWTON_TOL and abs(dp) < 1e-9 * max(abs(p), 1.0):
+                phi = self.sys.restore(phi)
+                return (phi, p, it) if phi is not None else None
+        return None
+
+
+def stability(be, k: int = EIGENVALUES, seed: int = 0) -> np.ndarray:
+    """The ``k`` lowest eigenvalues of H_L v = λ P v on {Cᵀv = 0} at the backend's state
+    (module docstring), ascending."""
+    from scipy.sparse.linalg import LinearOperator, lobpcg
+
+    from .fem.newton import NewtonSystem, linearize
+
+    sys_ = NewtonSystem(be)
+    lin = linearize(sys_, be.phi.copy())
+    step, N = sys_.step, be.phi.size
+    p = be.params
+    a, c, ke = 4.0 * p.kappa / p.eps**3, 4.0 * p.kappa / p.eps, p.kappa * p.eps
+
+    def H(X):
+        X = np.asarray(X).reshape(N, -1)
+        return np.column_stack([
+            step.hessian_vector(lin.phi, lin.mu, lin.Kphi, x)
+            + step.constraint_hessian_vector(lin.phi, lin.Kphi, x, lin.lam[0], lin.lam[1])
+            for x in X.T])
+
+    def P(X):
+        X = np.asarray(X).reshape(N, -1)
+        w = be.space.weights
+        out = []
+        for x in X.T:
+            Kx = be.space.K @ x
+            out.append(a * w * x + c * Kx + ke * (be.space.K @ (Kx / w)))
+        return np.column_stack(out)
+
+    def M(X):
+        X = np.asarray(X).reshape(N, -1)
+        return np.column_stack([sys_.P_inverse(x) for x in X.T])
+
+    Y = np.column_stack([sys_.P_inverse(cj) for cj in lin.C])
+    X = np.random.default_rng(seed).standard_normal((N, k))
+    ops = [LinearOperator((N, N), matvec=f, matmat=f, dtype=float) for f in (H, P, M)]
+    import warnings
+
+    with warnings.catch_warnings():  # the accuracy reached is the caller's to judge
+        warnings.simplefilter("ignore", UserWarning)
+        vals, _ = lobpcg(ops[0], X, B=ops[1], M=ops[2], Y=Y, tol=1e-6, maxiter=STABILITY_ITS,
+                         largest=False)
+    return np.sort(vals)
+
+
+# ---------------------------------------------------------------------------------------------
+# the branch folder
+# ---------------------------------------------------------------------------------------------
+def describe_point(be, name: str, cont: Continuation, newton: int, seconds: float,
+                   eigenvalues: np.ndarray) -> dict:
+    from .sharp import reduced_energy
+
+    final = be.diagnostics()
+    shape, _ = be.describe_final(final)
+    sharp = (shape or {}).get("sharp") or {}
+    unstable = int(np.sum(eigenvalues < UNSTABLE))
+    return {name: cont.p, "e": reduced_energy(final, be.params.kappa),
+            **{k: final[k] for k in ("E", "W", "G", "V", "A", "dA")},
+            "v_surface": sharp.get("reduced_volume"),
+            "da_surface": sharp.get("reduced_area_difference"),
+            "label": (shape or {}).get("label"), "unstable": unstable,
+            "eigenvalues": [float(x) for x in eigenvalues],
+            "lowest_eigenvalue": float(eigenvalues[0]) if len(eigenvalues) else None,
+            "newton": newton, "seconds": round(seconds, 2), "theta": cont.theta}
+
+
+def save_point(out: Path, k: int, be, row: dict) -> None:
+    from .output import write_fields, write_json_atomic
+
+    folder = out / "points" / f"{k:04d}"
+    folder.mkdir(parents=True, exist_ok=True)
+    write_fields(folder / "final.npz", be.fields())
+    write_json_atomic(folder / "summary.json", row)
+
+
+def load_points(out: Path) -> list[tuple[dict, np.ndarray]]:
+    """The saved points of a branch folder, in order: (row, φ); a point cut short (no
+    summary.json) ends the list."""
+    found = []
+    for folder in sorted((out / "points").glob("[0-9][0-9][0-9][0-9]")):
+        try:
+            row = json.loads((folder / "summary.json").read_text())
+            with np.load(folder / "final.npz") as z:
+                phi = np.array(z["phi"])
+        except (OSError, ValueError, KeyError):
+            break
+        found.append((row, phi))
+    return found
+
+
+def write_table(out: Path, name: str, rows: list[dict]) -> None:
+    from .output import write_json_atomic  # noqa: F401 (the folder's other writer)
+
+    cols = (name, *COLUMNS[1:])
+    tmp = out / "branch.csv.tmp"
+    with open(tmp, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(("point", *cols))
+        for k, r in enumerate(rows):
+            w.writerow([k] + [_cell(r.get(c)) for c in cols])
+    tmp.replace(out / "branch.csv")
+
+
+def _cell(value):
+    if isinstance(value, float):
+        return f"{value:.10g}"
+    return "" if value is None else value
+
+
+def mark_folds(rows: list[dict], name: str) -> list[dict]:
+    """``fold``: at a point where the parameter turns (its neighbours on the same side), the
+    extremum of the quadratic through the three (arclength, parameter) points."""
+    for r in rows:
+        r["fold"] = ""
+    for i in range(1, len(rows) - 1):
+        a, b, c = (rows[j][name] for j in (i - 1, i, i + 1))
+        if (b - a) * (c - b) < 0:
+            s = np.array([rows[j].get("s", j) for j in (i - 1, i, i + 1)], dtype=float)
+            q = np.polyfit(s, [a, b, c], 2)
+            rows[i]["fold"] = (f"{np.polyval(q, -q[1] / (2 * q[0])):.6g}"
+                               if q[0] != 0 else f"{b:.6g}")
+    return rows
+
+
+def draw(out: Path, name: str, rows: list[dict], meridians: list) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .render import save_figure
+
+    paths = []
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    x = np.array([r[name] for r in rows])
+    e = np.array([r["e"] for r in rows])
+    stable = np.array([r["unstable"] == 0 for r in rows])
+    for i in range(len(rows) - 1):
+        both = stable[i] and stable[i + 1]
+        ax.plot(x[i:i + 2], e[i:i + 2], "-" if both else "--", color="tab:blue" if both
+                else "tab:red", lw=1.8)
+    ax.plot(x[stable], e[stable], "o", ms=3, color="tab:blue", label="stable")
+    ax.plot(x[~stable], e[~stable], "o", ms=3, color="tab:red", label="unstable")
+    for r in rows:
+        if r.get("fold"):
+            ax.plot([float(r["fold"])], [r["e"]], "k*", ms=11)
+    ax.set(xlabel=name, ylabel="e = (W + G) / W_sphere",
+           title=f"branch ({rows[0].get('label')} at {name} = {rows[0][name]:.4g}); ★ fold")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    save_figure(fig, out / "branch.png", dpi=110, colours=64)
+    plt.close(fig)
+    paths.append(out / "branch.png")
+    if meridians:
+        step = max(1, len(meridians) // 10)
+        chosen = meridians[::step][:10]
+        fig, axes = plt.subplots(1, len(chosen), figsize=(1.6 * len(chosen), 3.0))
+        for axis, (value, curves) in zip(np.atleast_1d(axes), chosen, strict=False):
+            for pts in curves:
+                axis.plot(pts[:, 0], pts[:, 1], "k", lw=1)
+                axis.plot(-pts[:, 0], pts[:, 1], "k", lw=1)
+            axis.set_aspect("equal")
+            axis.set_axis_off()
+            axis.set_title(f"{name} = {value:.3g}", fontsize=8)
+        fig.tight_layout()
+        save_figure(fig, out / "shapes.png", dpi=100, colours=32)
+        plt.close(fig)
+        paths.append(out / "shapes.png")
+    return paths
+
+
+# ---------------------------------------------------------------------------------------------
+# the driver
+# ---------------------------------------------------------------------------------------------
+def follow(scene, *, param: str, start: float, stop: float, step: float, out: Path,
+           backend_options: dict | None = None, n: int | None = None, quiet: bool = False,
+           max_points: int = 400) -> list[dict]:
+    """Follow the branch of ``scene``'s seed in ``param`` from ``start`` to ``stop`` (module
+    docstring); the rows of branch.csv."""
+    from .backend import make_backend
+    from .config import RunConfig
+    from .fem.newton import solve_steady
+    from .lock import FolderLock
+    from .loop import run_loop
+    from .runs import recipe
+
+    say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
+    options = {"geometry": "axisymmetric", **(backend_options or {})}
+    check_parameter(scene.params, param)
+    if not (math.isfinite(start) and math.isfinite(stop) and start != stop):
+        raise ModelError(f"--from and --to must be two different numbers, got {start}, {stop}")
+    if not (math.isfinite(step) and 0 < step <= abs(stop - start)):
+        raise ModelError(f"--step must be in (0, |to - from|], got {step}")
+    scene = replace(scene, params=set_parameter(scene.params, param, start))
+    steady = recipe("steady", scene)
+    config = RunConfig.build(scene, backend="fem", n=n, dt=steady["dt"],
+                             until_steady=1e-9, max_steps=20000, scheme="stabilized",
+                             constraints="exact", accelerate=True, backend_options=options)
+    config.check(scene)
+    identity = {"scene": scene.name, "params": scene.params.as_dict(), "param": param,
+                "from": start, "to": stop, "step": step, "n": config.n, "options": options}
+    identity = json.loads(json.dumps(identity, default=str))
+    out.mkdir(parents=True, exist_ok=True)
+    lock = FolderLock(out).acquire()
+    try:
+        recorded = out / "branch.json"
+        if recorded.is_file() and json.loads(recorded.read_text()) != identity:
+            raise ModelError(f"{out} holds another branch (its branch.json differs); give "
+                             "another --out")
+        from .output import write_json_atomic
+
+        write_json_atomic(recorded, identity)
+        be = make_backend("fem", scene, n=config.n, dt=config.dt, scheme="stabilized",
+                          constraints="exact", **options)
+        cont = Continuation(be, param)
+        done = load_points(out)
+        rows = [r for r, _ in done]
+        meridians = []
+        direction = 1.0 if stop > start else -1.0
+        if not done:  # the first point: the seed's steady state
+            t0 = time.perf_counter()
+            run_loop(be, dt=config.dt, until_steady=1e-9, max_steps=20000, every=10,
+                     accelerate=True)
+            newton = solve_steady(be, max_iterations=60)
+            if not newton.converged:
+                raise ModelError(f"the branch's first point did not converge: "
+                                 f"{newton.message}")
+            row = describe_point(be, param, cont, newton.iterations,
+                                 time.perf_counter() - t0, stability(be))
+            row["s"] = 0.0
+            save_point(out, 0, be, row)
+            done = [(row, be.phi.copy())]
+            rows = [row]
+            say(_line(param, row))
+        for r, _ in done:
+            cont.theta = r.get("theta", cont.theta)
+        ds, ds_min, ds_max = step, step / 8.0, 4.0 * step
+        for r, phi in done[-10:]:
+            be._set(phi, None)
+            meridians.append((r[param], _curves(be)))
+        while len(rows) < max_points:
+            last_row, phi_k = rows[-1], done[-1][1]
+            p_k = last_row[param]
+            if (p_k - stop) * direction >= 0:
+                say(f"reached {param} = {stop}")
+                break
+            be._set(phi_k, None)
+            cont.set_p(p_k)
+            if len(done) >= 2:  # the secant of the last two points
+                phi_j, p_j = done[-2][1], rows[-2][param]
+                t_phi, t_p = phi_k - phi_j, p_k - p_j
+                norm = math.sqrt(cont.theta * cont.inner(t_phi, t_phi) + t_p * t_p)
+                t_phi, t_p = t_phi / norm, t_p / norm
+            else:
+                t_phi, t_p = cont.tangent(phi_k)
+                if t_p * direction < 0:
+                    t_phi, t_p = -t_phi, -t_p
+            t0 = time.perf_counter()
+            corrected = None
+            while ds >= ds_min:
+                corrected = cont.correct(phi_k + ds * t_phi, p_k + ds * t_p, (phi_k, p_k),
+                                         (t_phi, t_p), ds)
+                if corrected is not None:
+                    break
+                ds *= 0.5
+            if corrected is None:
+                say(f"the branch ends at {param} = {p_k:.6g}: Newton does not converge at "
+                    f"an arclength step of {ds_min:.3g}")
+                break
+            phi, p, its = corrected
+            be._set(phi, None)
+            cont.set_p(p)
+            row = describe_point(be, param, cont, its, time.perf_counter() - t0,
+                                 stability(be))
+            row["s"] = last_row.get("s", 0.0) + ds
+            k = len(rows)
+            save_point(out, k, be, row)
+            rows.append(row)
+            done.append((row, phi.copy()))
+            meridians.append((p, _curves(be)))
+            say(_line(param, row))
+            write_table(out, param, mark_folds(rows, param))
+            if not _same_branch(rows[0]["label"], row["label"]):
+                say(f"the branch ends at {param} = {p:.6g}: its shape became a "
+                    f"{row['label']} (a topology change)")
+                break
+            ds = min(ds * 1.5, ds_max) if its <= 2 else ds
+        rows = mark_folds(rows, param)
+        write_table(out, param, rows)
+        draw(out, param, rows, meridians)
+    finally:
+        lock.release()
+    return rows
+
+
+def _curves(be):
+    from .axishape import meridians
+
+    try:
+        return [c.copy() for c in meridians(be).curves]
+    except Exception:  # noqa: BLE001 (a picture's curves, never the branch's numbers)
+        return []
+
+
+def _same_branch(first, label) -> bool:
+    from .sharp import BRANCH_OF_LABEL
+
+    return BRANCH_OF_LABEL.get(first, first) == BRANCH_OF_LABEL.get(label, label)
+
+
+def _line(param, row) -> str:
+    return (f"  {param} = {row[param]:.6g}: e = {row['e']:.8g}, {row['label']}, unstable "
+            f"{row['unstable']} (lowest eigenvalue {row['lowest_eigenvalue']:.3g}), Newton "
+            f"{row['newton']}, {row['seconds']} s")
+
+
+def main(argv=None) -> int:
+    from .registry import VESICLE_BRANCHES
+
+    ap = argparse.ArgumentParser(prog="python -m fem_ade.branch",
+                                 description=__doc__.split("\n\n")[0])
+    ap.add_argument("scene", help="vesicle (the family), a scene name or a .toml file")
+    ap.add_argument("--param", required=True, choices=PARAMETERS)
+    ap.add_argument("--from", dest="start", type=float, required=True)
+    ap.add_argument("--to", dest="stop", type=float, required=True)
+    ap.add_argument("--step", type=float, default=0.01,
+                    help="the arclength step, in units of the parameter (default 0.01)")
+    ap.add_argument("--out", required=True, help="the branch folder")
+    ap.add_argument("--geometry", default="axisymmetric", choices=("axisymmetric",),
+                    help="axisymmetric (the default and, for now, the only one)")
+    ap.add_argument("--n", type=int, help="cells per L (default: from eps)")
+    ap.add_argument("--order", type=int, help="element order (default 8)")
+    ap.add_argument("--quiet", action="store_true")
+    ves = ap.add_argument_group("the vesicle family")
+    for name in ("v", "da0", "kbar", "C", "eps", "R0"):
+        ves.add_argument(f"--{name}", type=float)
+    ves.add_argument("--branch", choices=VESICLE_BRANCHES)
+
+    def error(message):
+        ap.exit(2, f"fem_ade.branch: error: {message}\n")
+
+    ap.error = error
+    args = ap.parse_args(argv)
+    try:
+        from .scenes import resolve_scene, vesicle_scene
+
+        chosen = {k: getattr(args, k) for k in ("v", "da0", "kbar", "C", "eps", "R0",
+                                                 "branch") if getattr(args, k) is not None}
+        if args.scene == "vesicle":
+            chosen[args.param] = args.start  # the seed: the branch's first point
+            scene = vesicle_scene(**chosen)
+        elif chosen:
+            raise ModelError("--v, --da0, ... describe the vesicle scene; give them with "
+                             "the scene vesicle")
+        else:
+            scene = resolve_scene(args.scene)
+        options = {} if args.order is None else {"order": args.order}
+        follow(scene, param=args.param, start=args.start, stop=args.stop, step=args.step,
+               out=Path(args.out), backend_options=options, n=args.n, quiet=args.quiet)
+    except ModelError as err:
+        print(f"fem_ade.branch: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("fem_ade.branch: interrupted; the same command goes on from the last point",
+              file=sys.stderr)
+        return 130
+    print(f"wrote {Path(args.out) / 'branch.csv'} and branch.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

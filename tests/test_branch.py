@@ -1,0 +1,88 @@
+"""Branches by continuation (fem_ade.branch): each point a steady state, the table and the
+pictures, a branch resumed after it was stopped, and mistakes refused in one line."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from fem_ade.backend import make_backend
+from fem_ade.branch import get_parameter, main, set_parameter
+from fem_ade.fem.newton import solve_steady
+from fem_ade.scenes import vesicle_scene
+
+ARGS = ["vesicle", "--branch", "prolate", "--eps", "0.05", "--param", "v", "--from", "0.95",
+        "--to", "0.91", "--step", "0.02", "--quiet"]
+
+
+def rows(folder):
+    with open(folder / "branch.csv") as fh:
+        return list(csv.DictReader(fh))
+
+
+@pytest.fixture(scope="module")
+def branch(tmp_path_factory):
+    out = tmp_path_factory.mktemp("branch") / "prolate"
+    assert main([*ARGS, "--out", str(out)]) == 0
+    return out
+
+
+def test_a_branch_of_steady_states(branch):
+    """From v = 0.95 down to 0.91: the prolate's e rises as v falls, every point stable
+    (lowest eigenvalue > 0), the parameter reached, the table and pictures written."""
+    table = rows(branch)
+    v = [float(r["v"]) for r in table]
+    e = [float(r["e"]) for r in table]
+    assert v[0] == 0.95 and v[-1] <= 0.91 and len(table) >= 3
+    assert all(a > b for a, b in zip(v, v[1:], strict=False))
+    assert all(a < b for a, b in zip(e, e[1:], strict=False))
+    assert all(r["unstable"] == "0" and float(r["lowest_eigenvalue"]) > 0 for r in table)
+    assert (branch / "branch.png").is_file() and (branch / "shapes.png").is_file()
+
+
+def test_each_point_is_a_steady_state(branch):
+    """Newton from a saved point, at its parameter, does not move it: E to 1e-10."""
+    scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05)
+    n = json.loads((branch / "branch.json").read_text())["n"]
+    be = make_backend("fem", scene, n=n, geometry="axisymmetric", scheme="stabilized",
+                      constraints="exact")
+    point = json.loads((branch / "points" / "0002" / "summary.json").read_text())
+    params = set_parameter(be.params, "v", point["v"])
+    be.stepper.params = be.params = params
+    with np.load(branch / "points" / "0002" / "final.npz") as z:
+        be._set(np.array(z["phi"]), None)
+    result = solve_steady(be)
+    assert result.converged and result.iterations <= 1
+    assert result.E == pytest.approx(point["E"], rel=1e-10)
+    assert get_parameter(params, "v") == pytest.approx(point["v"], rel=1e-12)
+
+
+def test_a_stopped_branch_goes_on(branch, tmp_path):
+    """The folder of a branch stopped after its second point, run again with the same
+    command, ends with the table of the branch never stopped."""
+    import shutil
+
+    out = tmp_path / "stopped"
+    shutil.copytree(branch, out)
+    for folder in sorted((out / "points").iterdir())[2:]:
+        shutil.rmtree(folder)
+    assert main([*ARGS, "--out", str(out)]) == 0
+    whole, again = rows(branch), rows(out)
+    assert [r["v"] for r in again] == [r["v"] for r in whole]
+    for a, b in zip(whole, again, strict=True):
+        assert float(a["E"]) == pytest.approx(float(b["E"]), rel=1e-9)
+
+
+@pytest.mark.parametrize("extra, word", [
+    (["--param", "da0"], "da0"), (["--step", "0"], "--step"),
+    (["--to", "0.95"], "two different"),
+])
+def test_branch_mistakes_are_one_line(tmp_path, capsys, extra, word):
+    args = list(ARGS)
+    for i in range(0, len(extra), 2):
+        args[args.index(extra[i]) + 1] = extra[i + 1]
+    code = main([*args, "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and word in err, err
+    assert not (tmp_path / "x").exists()
