@@ -73,7 +73,7 @@ class Backend(Protocol):
 
     def grid_phi(self) -> np.ndarray:
         """φ on the uniform periodic grid x_j = jL/m, shape (m,)*dim (shape analysis, pictures,
-        and the start of another run: :class:`fem_ade.scenes.InitialCondition` kind "file")."""
+        and the start of another run: :class:`fem_ade.initial.FieldIC`, kind "file")."""
 
     def output_mesh(self):
         """(points (P, 3), [(cell type, connectivity)]) for the XDMF series, periodic images

@@ -534,11 +534,6 @@ KINDS: dict[str, type[Shape]] = {c.kind: c for c in (Ellipsoid, Sphere, Torus, S
                                                      Starfish, Discocyte, Meridian, FieldIC)}
 
 
-def from_field(phi: np.ndarray, path: str = "") -> FieldIC:
-    """Start from ``phi``, a field on a uniform periodic grid (m,)*dim of the scene's box."""
-    return FieldIC(path=str(path), grid=check_grid_field(phi, "the initial field"))
-
-
 # ---------------------------------------------------------------------------------------------
 # fields from files
 # ---------------------------------------------------------------------------------------------

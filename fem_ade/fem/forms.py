@@ -15,14 +15,13 @@ the term's rank-one Hessian σbbᵀ in the stabilized scheme and the direction o
 constraints. The explicit part of the bending force, κN(φ) of model §4, is
 :func:`bending_explicit`.
 
-``*_form``: the same explicit terms integrated at quadrature points (scikit-fem LinearForms),
-for verification and for ``products="quadrature"``. Observed rates against the spectral
-reference are 2 (Q1) and 4 (Q2) in E, V, A with nodal products, as with quadrature.
+``*_linear``: each gradient's derivative along a direction (the exact Hessian-vector products
+of Newton's method, docs/model.md §12).
 """
 
 from __future__ import annotations
 
-from skfem import BilinearForm, LinearForm
+from skfem import BilinearForm
 from skfem.helpers import dot, grad
 
 from ..model import AREA_FACTOR
@@ -160,32 +159,3 @@ def area_gradient_linear(phi, v, eps, coef=AREA_FACTOR):
 def volume_gradient_linear(phi, v, localized=False):
     """d/dt of :func:`volume_gradient`: c′ (0 for the paper's V)."""
     return -1.5 * phi * v if localized else 0.0 * v
-
-
-# ---------------------------------------------------------------------------------------------
-# the explicit terms at quadrature points (w.phi, w.mu are interpolated fields)
-# ---------------------------------------------------------------------------------------------
-@LinearForm
-def bending_explicit_form(v, w):
-    """κ⟨N(φ), v⟩ at quadrature points (model §4–§5); ∇(φ³) = 3φ²∇φ, ∇(φ²) = 2φ∇φ."""
-    phi, mu, eps, C = w.phi, w.mu, w.eps, w.C
-    flux = (3.0 / eps * phi**2 + 2.0 * C * phi) * dot(grad(phi), grad(v))
-    P = (3.0 * phi**2 + 2.0 * C * eps * phi - 1.0) * (phi**2 - 1.0) * (phi + C * eps)
-    src = (3.0 / eps * phi**2 + 2.0 * C * phi) * mu + P / eps**3
-    return w.kappa * (flux + src * v)
-
-
-@LinearForm
-def area_difference_gradient_form(v, w):
-    """:func:`area_difference_gradient` at quadrature points:
-    coef·[(2φμ, v) + (2φ∇φ, ∇v) + (1/ε²)(1 − 6φ² + 5φ⁴, v)]."""
-    phi = w.phi
-    src = 2.0 * phi * w.mu + (1.0 - 6.0 * phi**2 + 5.0 * phi**4) / w.eps**2
-    return w.coef * (2.0 * phi * dot(grad(phi), grad(v)) + src * v)
-
-
-@LinearForm
-def area_gradient_form(v, w):
-    """:func:`area_gradient` at quadrature points: coef·[ε(∇φ, ∇v) + (1/ε)((φ² − 1)φ, v)]."""
-    phi = w.phi
-    return w.coef * (w.eps * dot(grad(phi), grad(v)) + (phi**2 - 1.0) * phi * v / w.eps)

@@ -69,14 +69,6 @@ def petsc():
     return _PETSC
 
 
-def available() -> bool:
-    try:
-        petsc()
-    except ModelError:
-        return False
-    return True
-
-
 class Partition:
     """The DMDA box of this rank in a periodic DOF grid of ``shape`` (serial axis order)."""
 
