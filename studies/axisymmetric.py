@@ -334,15 +334,23 @@ def cost_figure(cost: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    def level(p):  # nodes per ε (axisymmetric) or nodes per axis
+        return p["resolution"][1] if isinstance(p["resolution"], list) else p["resolution"]
+
     for (name, pts), marker in zip(cost["runs"].items(), "os^", strict=False):
         if pts:
-            pts = sorted(pts, key=lambda p: p["cpu_s"])
-            ax.loglog([p["cpu_s"] for p in pts], [max(p["error"], 1e-12) for p in pts],
-                      marker + "-", label=name)
+            pts = sorted(pts, key=level)  # in order of resolution (a coarse run may take
+            line, = ax.loglog([p["cpu_s"] for p in pts],  # more steps, so more time)
+                              [max(p["error"], 1e-12) for p in pts], marker + "-", label=name)
+            for p in pts:
+                ax.annotate(f"{level(p):g}", (p["cpu_s"], max(p["error"], 1e-12)),
+                            textcoords="offset points", xytext=(4, 3), fontsize=7,
+                            color=line.get_color())
     for t in TARGETS:
         ax.axhline(t, color="0.8", lw=0.7, zorder=0)
     ax.set(xlabel="CPU seconds (one thread)", ylabel="relative error in E",
-           title=f"{cost['case']}, ε = {cost['eps']:g}: a steady state")
+           title=f"{cost['case']}, ε = {cost['eps']:g}: a steady state\n(labels: nodes per ε "
+                 "(axisymmetric), nodes per axis (3D))")
     ax.legend(fontsize=8)
     fig.tight_layout()
     save_figure(fig, path, dpi=110, colours=64)
