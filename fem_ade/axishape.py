@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import reduced_area_difference, reduced_volume
-from .shape import CYLINDER, DIMPLE, NECK_RATIO, OBLATE, PROLATE
+from .shape import CYLINDER, DIMPLE, OBLATE, PROLATE, count_necks
 
 #: the contour grid: each gap between nodes split into this many
 REFINE = 4
@@ -101,8 +101,31 @@ def _polish(points, at, grad, R, steps: int = 4):
     return p
 
 
+class SavedField:
+    """An axisymmetric run's final field rebuilt from its final.npz (what :func:`meridians`
+    needs of a backend: ``space``, ``phi``, ``domain``, ``mesh.fine``, ``params.eps``)."""
+
+    def __init__(self, data, eps: float):
+        from types import SimpleNamespace
+
+        from .fem.tensor import BoundedAxis, TensorSpace
+
+        order = int(data["order"])
+        r, z = np.asarray(data["r_vertices"]), np.asarray(data["z_vertices"])
+        self.space = TensorSpace([BoundedAxis(r, order, radial=True), BoundedAxis(z, order)],
+                                 order)
+        self.phi = np.asarray(data["phi"], dtype=float)
+        if self.phi.shape != (self.space.n_dofs,):
+            raise ValueError(f"phi has {self.phi.size} values, its space {self.space.n_dofs}")
+        self.domain = (float(r[-1]), float(z[0]), float(z[-1]))
+        ra, rb, za, zb = (float(x) for x in data["fine_zone"])
+        self.mesh = SimpleNamespace(fine=((ra, rb), (za, zb)))
+        self.params = SimpleNamespace(eps=eps)
+
+
 def meridians(be) -> Meridians:
-    """The φ = 0 curves of an axisymmetric backend's current field (module docstring)."""
+    """The φ = 0 curves of an axisymmetric backend's current field (module docstring; or of a
+    :class:`SavedField`)."""
     import contourpy
 
     space = be.space
@@ -238,17 +261,7 @@ def body_geometry(M: Meridians) -> dict | None:
     rows = (M.z >= lo) & (M.z <= hi)
     necks, worst = 0, 1.0
     if a_z >= a_x and rows.sum() >= 3:  # cross-section areas along z
-        area = _inside_length(M.phi[:, rows].T, M.r, weight="r")
-        i = 1
-        while i < len(area) - 1:
-            if area[i] <= area[i - 1] and area[i] <= area[i + 1] and area[i] > 0:
-                ratio = area[i] / min(area[:i].max(), area[i + 1:].max())
-                if ratio < NECK_RATIO:
-                    necks += 1
-                    worst = min(worst, float(ratio))
-                while i < len(area) - 1 and area[i + 1] <= area[i] * (1 + 1e-9) + 1e-300:
-                    i += 1  # one neck per minimum, however flat
-            i += 1
+        necks, worst = count_necks(_inside_length(M.phi[:, rows].T, M.r, weight="r"))
     cols = M.r <= pts[:, 0].max()
     thickness = _inside_length(M.phi[cols][:, rows], M.z[rows])  # along z, at each r
     dimple = float(1.0 - thickness[0] / thickness.max()) if thickness.max() > 0 else 0.0

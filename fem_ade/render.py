@@ -222,7 +222,6 @@ def render_shape(phi: np.ndarray, L: float, path: str | Path, *, title: str | No
     :func:`fem_ade.shape.extract_surface` of ``phi`` if the caller has it (it is moved to
     display coordinates here). Returns the path written.
     """
-    from matplotlib.figure import Figure
 
     phi = np.asarray(phi, dtype=float)
     if phi.ndim != 3 or len(set(phi.shape)) != 1:
@@ -244,27 +243,11 @@ def render_shape(phi: np.ndarray, L: float, path: str | Path, *, title: str | No
     lines = ([title] if title else []) + (
         subtitle.splitlines() if subtitle is not None
         else [summary_line(descriptors)] if descriptors else [])
-    W, H = size
     dpi = 100
-    fig = Figure(figsize=(W / dpi, H / dpi), dpi=dpi)  # no pyplot: no global state
-    line_h = 26.0 / H  # figure fraction per text line
-    top = 0.97 - line_h * len(lines) - 30.0 / H
-    gs = fig.add_gridspec(1, 2, width_ratios=(1.0, 0.95), left=0.01, right=0.93, bottom=0.09,
-                          top=top, wspace=0.08)
+    fig, gs, line_h, top = _two_panels(size, len(lines), dpi)
     # left: 3D view
-    if engine == "vtk":
-        ax3 = fig.add_subplot(gs[0])
-        px = (max(int(W * 0.5 * 2), 64), max(int(H * (top - 0.09) * 2), 64))
-        if S.n_components:
-            img = _render_vtk(S, px, view, _unwrap_y(S, y_shown), translucent)
-            ax3.imshow(img, interpolation="antialiased")
-        ax3.set_axis_off()
-        _draw_triad(ax3, view)
-    else:
-        ax3 = fig.add_subplot(gs[0], projection="3d")
-        _render_mpl(ax3, S, view, translucent)
-    if not S.n_components:
-        ax3.text(0.5, 0.5, "no φ = 0 surface", transform=ax3.transAxes, ha="center")
+    ax3 = _surface_panel(fig, gs[0], S, view, engine, size, top,
+                         _unwrap_y(S, y_shown) if S.n_components else 0.0, translucent)
     traced = engine == "vtk" and S.n_components
     ax3.set_title(f"membrane φ = 0 (view az {view[0]:g}°, el {view[1]:g}°"
                   + (f"; black: the section y = {y_shown:.3g})" if traced else ")"), fontsize=11)
@@ -287,14 +270,7 @@ def render_shape(phi: np.ndarray, L: float, path: str | Path, *, title: str | No
     cb = fig.colorbar(pcm, ax=ax, fraction=0.046, pad=0.03)
     cb.set_label("φ  (+1 inside, −1 outside)")
 
-    for k, line in enumerate(lines):
-        first = k == 0 and bool(title)
-        fig.text(0.5, 0.985 - k * line_h, line, ha="center", va="top",
-                 fontsize=14 if first else 11, fontweight="bold" if first else "normal",
-                 color="black" if first else "#333333")
-    path = Path(path)
-    _save(fig, path, dpi)
-    return path
+    return _titled(fig, lines, line_h, bool(title), path, dpi)
 
 
 def render_meridians(M, path: str | Path, *, title: str = "", subtitle: str = "",
@@ -305,7 +281,6 @@ def render_meridians(M, path: str | Path, *, title: str = "", subtitle: str = ""
     surface of revolution of its φ = 0 meridians (left; black: the meridional section) and
     φ on the meridional plane, mirrored to −r (right; black: φ = 0, dashed: the graded
     mesh's fine zone)."""
-    from matplotlib.figure import Figure
 
     from .axishape import RevolvedSurface
 
@@ -313,25 +288,9 @@ def render_meridians(M, path: str | Path, *, title: str = "", subtitle: str = ""
     translucent = _enclosing(descriptors, S.n_components)
     engine = choose_engine(engine)
     lines = ([title] if title else []) + (subtitle.splitlines() if subtitle else [])
-    W, H = size
     dpi = 100
-    fig = Figure(figsize=(W / dpi, H / dpi), dpi=dpi)
-    line_h = 26.0 / H
-    top = 0.97 - line_h * len(lines) - 30.0 / H
-    gs = fig.add_gridspec(1, 2, width_ratios=(1.0, 0.95), left=0.01, right=0.93, bottom=0.09,
-                          top=top, wspace=0.08)
-    if engine == "vtk":
-        ax3 = fig.add_subplot(gs[0])
-        px = (max(int(W * 0.5 * 2), 64), max(int(H * (top - 0.09) * 2), 64))
-        if S.n_components:
-            ax3.imshow(_render_vtk(S, px, view, 0.0, translucent), interpolation="antialiased")
-        ax3.set_axis_off()
-        _draw_triad(ax3, view)
-    else:
-        ax3 = fig.add_subplot(gs[0], projection="3d")
-        _render_mpl(ax3, S, view, translucent)
-    if not S.n_components:
-        ax3.text(0.5, 0.5, "no φ = 0 surface", transform=ax3.transAxes, ha="center")
+    fig, gs, line_h, top = _two_panels(size, len(lines), dpi)
+    ax3 = _surface_panel(fig, gs[0], S, view, engine, size, top, 0.0, translucent)
     ax3.set_title(f"membrane φ = 0, revolved (view az {view[0]:g}°, el {view[1]:g}°"
                   + ("; black: the meridian)" if engine == "vtk" and S.n_components else ")"),
                   fontsize=11)
@@ -374,8 +333,49 @@ def render_meridians(M, path: str | Path, *, title: str = "", subtitle: str = ""
     ax.set_title("φ on the meridional plane (black: φ = 0; dashed: fine zone)", fontsize=12)
     cb = fig.colorbar(pcm, ax=ax, fraction=0.046, pad=0.03)
     cb.set_label("φ  (+1 inside, −1 outside)")
+    return _titled(fig, lines, line_h, bool(title), path, dpi)
+
+
+def _two_panels(size, n_lines: int, dpi: int):
+    """(figure, grid of two panels, the height of a text line, the panels' top) of a
+    picture of ``size`` pixels with ``n_lines`` lines of text above (no pyplot: no global
+    state)."""
+    from matplotlib.figure import Figure
+
+    W, H = size
+    fig = Figure(figsize=(W / dpi, H / dpi), dpi=dpi)
+    line_h = 26.0 / H  # figure fraction per text line
+    top = 0.97 - line_h * n_lines - 30.0 / H
+    gs = fig.add_gridspec(1, 2, width_ratios=(1.0, 0.95), left=0.01, right=0.93, bottom=0.09,
+                          top=top, wspace=0.08)
+    return fig, gs, line_h, top
+
+
+def _surface_panel(fig, cell, S, view, engine: str, size, top: float, slice_y: float,
+                   translucent: set[int]):
+    """The left panel: the surface S (a :class:`fem_ade.shape.Surface`, or a revolved one)
+    rendered by VTK (the section at y = ``slice_y`` traced on it) or by matplotlib."""
+    W, H = size
+    if engine == "vtk":
+        ax3 = fig.add_subplot(cell)
+        px = (max(int(W * 0.5 * 2), 64), max(int(H * (top - 0.09) * 2), 64))
+        if S.n_components:
+            ax3.imshow(_render_vtk(S, px, view, slice_y, translucent),
+                       interpolation="antialiased")
+        ax3.set_axis_off()
+        _draw_triad(ax3, view)
+    else:
+        ax3 = fig.add_subplot(cell, projection="3d")
+        _render_mpl(ax3, S, view, translucent)
+    if not S.n_components:
+        ax3.text(0.5, 0.5, "no φ = 0 surface", transform=ax3.transAxes, ha="center")
+    return ax3
+
+
+def _titled(fig, lines, line_h, titled: bool, path, dpi) -> Path:
+    """The lines above a picture (the first bold when it is the title), then save it."""
     for k, line in enumerate(lines):
-        first = k == 0 and bool(title)
+        first = k == 0 and titled
         fig.text(0.5, 0.985 - k * line_h, line, ha="center", va="top",
                  fontsize=14 if first else 11, fontweight="bold" if first else "normal",
                  color="black" if first else "#333333")
@@ -636,6 +636,20 @@ def render_run(out: str | Path, *, view: tuple[float, float] = DEFAULT_VIEW,
         raise _BadInput(f"{out} is not a complete run folder ({err})") from None
     final = summary.get("final") or {}
     desc = None
+    if (summary.get("backend_info") or {}).get("geometry") == "axisymmetric":
+        from .axishape import SavedField, describe_meridians, meridians
+
+        try:
+            with np.load(out / "final.npz") as data:
+                M = meridians(SavedField(data, params.eps))
+        except (KeyError, ValueError, OSError) as err:
+            raise _BadInput(f"{out / 'final.npz'} is not an axisymmetric run's ({err})") \
+                from None
+        desc = describe_meridians(M, V=final.get("V"), A=final.get("A"),
+                                  dA=final.get("dA") if params.on("ade") else None, D=params.D)
+        return draw_run(out, phi, params, history, desc, label=run_label(summary, 0),
+                        view=view, size=size, engine=engine, quiet=quiet, surface=M,
+                        physical_time=not summary.get("accelerate", False))
     if phi.ndim == 3:
         desc = describe(phi, L, V=final.get("V"), A=final.get("A"),
                         dA=final.get("dA") if params.on("ade") else None, D=params.D)

@@ -530,6 +530,24 @@ PROLATE, CYLINDER = 1.15, 2.2
 OBLATE = 0.85
 
 
+def count_necks(area: np.ndarray) -> tuple[int, float]:
+    """(necks, the smallest ratio): the minima of a cross-section area profile below
+    :data:`NECK_RATIO` of the smaller of the largest areas on either side, one per minimum
+    however flat."""
+    necks, worst = 0, 1.0
+    i = 1
+    while i < len(area) - 1:
+        if area[i] <= area[i - 1] and area[i] <= area[i + 1] and area[i] > 0:
+            ratio = area[i] / min(area[:i].max(), area[i + 1:].max())
+            if ratio < NECK_RATIO:
+                necks += 1
+                worst = min(worst, float(ratio))
+                while i < len(area) - 1 and area[i + 1] <= area[i] * (1 + 1e-9) + 1e-300:
+                    i += 1  # one neck per minimum, however flat
+        i += 1
+    return necks, worst
+
+
 def body_geometry(S: Surface) -> dict | None:
     """Principal semi-axes, necks and dimple of the largest region {φ > 0} (None if there is
     none, or it winds around the periodic box). See the module docstring."""
@@ -556,17 +574,7 @@ def body_geometry(S: Surface) -> dict | None:
     s1 = Y @ vec[:, 0]
     bins = np.arange(s1.min() - h, s1.max() + 2 * h, h)
     area = np.convolve(np.histogram(s1, bins)[0] * cell / h, np.ones(3) / 3, mode="same")
-    necks, worst = 0, 1.0
-    i = 1
-    while i < len(area) - 1:
-        if area[i] <= area[i - 1] and area[i] <= area[i + 1] and area[i] > 0:
-            ratio = area[i] / min(area[:i].max(), area[i + 1:].max())
-            if ratio < NECK_RATIO:
-                necks += 1
-                worst = min(worst, float(ratio))
-                while i < len(area) - 1 and area[i + 1] <= area[i] * (1 + 1e-9) + 1e-300:
-                    i += 1  # one neck per minimum, however flat
-        i += 1
+    necks, worst = count_necks(area)
     # thickness across the short axis along lines parallel to it, as a function of their
     # distance ρ from the centroid (8 directions, φ by trilinear interpolation)
     t = np.arange(-axes[0] - 2 * h, axes[0] + 2 * h, 0.5 * h)

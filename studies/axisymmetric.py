@@ -184,20 +184,13 @@ def default_choice(rows: list[dict], order: int, limit: float = 1e-4) -> float |
 # stage cost
 # ---------------------------------------------------------------------------------------------
 def time_to(points, target):
-    """As studies/cost.py: the CPU time at which the error first reaches ``target``, log–log
-    between measured points in order of time; None if none does."""
-    pts = sorted(points)
-    best, prev = math.inf, None
-    for t, e in pts:
-        e = min(e, best)
-        if e <= target:
-            if prev is None or prev[1] <= target:
-                return t
-            (t0, e0), (t1, e1) = prev, (t, e)
-            w = (math.log(target) - math.log(e0)) / (math.log(e1) - math.log(e0))
-            return math.exp(math.log(t0) + w * (math.log(t1) - math.log(t0)))
-        best, prev = e, (t, e)
-    return None
+    """studies/cost.py's: the CPU time at which the error first reaches ``target``."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from cost import time_to as cost_time_to
+
+    return cost_time_to(points, target)
 
 
 def cost_stage(runs: Runs, plan, compute=True) -> dict:

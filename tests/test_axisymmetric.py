@@ -239,8 +239,8 @@ def test_graded_mesh_and_the_default_resolution():
 def test_cli_run_folder_picture_and_resume(tmp_path, cli):
     """The vesicle family through the command line: a steady state (the family's default
     recipe), its verdict and sharp comparison, the run folder (summary, final.npz with the
-    (r, z) field, XDMF of the half-plane, shape.png), and a resume that continues the
-    interrupted run to the identical end."""
+    (r, z) field, XDMF of the half-plane, shape.png, drawn again identically from the files),
+    and a resume that continues the interrupted run to the identical end."""
     out = tmp_path / "run"
     args = ["vesicle", "--v", "0.9", "--branch", "oblate", "--eps", "0.05", "--geometry",
             "axisymmetric", "--out", out, "--every", "5"]
@@ -254,6 +254,12 @@ def test_cli_run_folder_picture_and_resume(tmp_path, cli):
         assert z["points"].shape[0] == 2 and z["phi"].shape == (z["points"].shape[1],)
         assert z["phi_grid"].ndim == 3
     assert (out / "shape.png").stat().st_size > 10_000 and (out / "phi.xdmf").is_file()
+    # the picture again from the folder's files (python -m fem_ade.render): the same bytes
+    from fem_ade.render import render_run
+
+    picture = (out / "shape.png").read_bytes()
+    render_run(out, quiet=True)
+    assert (out / "shape.png").read_bytes() == picture
     # stopped at step 20 with a checkpoint, resumed: the uninterrupted end
     part = tmp_path / "part"
     r = cli([*args[:-4], "--out", part, "--every", "5", "--steps", "20",

@@ -402,11 +402,16 @@ class AxisymmetricFEMBackend(FEMBackend):
 
     # -- output --------------------------------------------------------------------------------
     def fields(self) -> dict[str, np.ndarray]:
-        """φ, μ at the nodes, their (r, z) ``points`` (2, N), the node axes ``r``, ``z``."""
+        """φ, μ at the nodes, their (r, z) ``points`` (2, N), the node axes ``r``, ``z``, and
+        what rebuilds the space: the cell vertices, the order, the fine zone."""
         ar, az = self.space.axes
+        (ra, rb), (za, zb) = self.mesh.fine
         return {"phi": self.phi.copy(), "mu": self.mu.copy(),
                 "points": self.space.doflocs.copy(), "r": ar.nodes.copy(),
-                "z": az.nodes.copy(), "axis": np.array(self.axis)}
+                "z": az.nodes.copy(), "axis": np.array(self.axis),
+                # what rebuilds the space (fem_ade.axishape.Meridians.from_fields)
+                "r_vertices": self.mesh.r.copy(), "z_vertices": self.mesh.z.copy(),
+                "order": np.array(self.order), "fine_zone": np.array([ra, rb, za, zb])}
 
     def phi_rz(self) -> np.ndarray:
         """φ as an (N_r, N_z) array."""

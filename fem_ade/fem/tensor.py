@@ -34,6 +34,26 @@ import scipy.sparse as sp
 from . import gll
 
 
+def _assemble(Ke: np.ndarray, dofs: np.ndarray, size: int) -> sp.csr_matrix:
+    """Σ_e of the cell matrices ``Ke`` (n, p + 1, p + 1) on the nodes ``dofs`` (n, p + 1)."""
+    k = dofs.shape[1]
+    rows = np.repeat(dofs, k, axis=1).ravel()
+    cols = np.tile(dofs, (1, k)).ravel()
+    K = sp.csr_matrix((Ke.ravel(), (rows, cols)), shape=(size, size))
+    K.sum_duplicates()
+    K.sort_indices()
+    return K
+
+
+def _interpolation(B: np.ndarray, dofs: np.ndarray, size: int) -> sp.csr_matrix:
+    """(P, N): the points' rows ``B`` (P, p + 1) of their cells' basis on the nodes ``dofs``
+    (P, p + 1)."""
+    rows = np.repeat(np.arange(len(B)), B.shape[1])
+    M = sp.csr_matrix((B.ravel(), (rows, dofs.ravel())), shape=(len(B), size))
+    M.sum_duplicates()
+    return M
+
+
 class Axis:
     """One periodic axis: cell vertices 0 = x₀ < … < xₙ = L, GLL nodes of order p per cell.
 
@@ -66,14 +86,8 @@ class Axis:
     @functools.cached_property
     def stiffness(self) -> sp.csr_matrix:
         """K₁ = Σ_e (2/h_e) Dᵀ diag(w) D, periodic (csr, N × N)."""
-        p, dofs = self.order, self.element_dofs
-        Ke = (2.0 / self.h)[:, None, None] * gll.stiffness(p)[None]
-        rows = np.repeat(dofs, p + 1, axis=1).ravel()
-        cols = np.tile(dofs, (1, p + 1)).ravel()
-        K = sp.csr_matrix((Ke.ravel(), (rows, cols)), shape=(self.size, self.size))
-        K.sum_duplicates()
-        K.sort_indices()
-        return K
+        Ke = (2.0 / self.h)[:, None, None] * gll.stiffness(self.order)[None]
+        return _assemble(Ke, self.element_dofs, self.size)
 
     @functools.cached_property
     def laplacian(self) -> sp.csr_matrix:
@@ -95,11 +109,7 @@ class Axis:
                        0, self.cells - 1)
         xi = 2.0 * (y - (self.vertices[cell] - self.vertices[0])) / self.h[cell] - 1.0
         B = gll.interpolation_matrix(p, np.clip(xi, -1.0, 1.0))  # (len(y), p + 1)
-        rows = np.repeat(np.arange(len(y)), p + 1)
-        cols = self.element_dofs[cell].ravel()
-        M = sp.csr_matrix((B.ravel(), (rows, cols)), shape=(len(y), self.size))
-        M.sum_duplicates()
-        return M
+        return _interpolation(B, self.element_dofs[cell], self.size)
 
     def lor(self) -> Axis:
         """The low-order refined axis: p = 1 on this axis' nodes (MFEM's LOR)."""
@@ -187,12 +197,7 @@ class BoundedAxis:
         else:
             Ke = (2.0 / self.h)[:, None, None] * gll.stiffness(p)[None]
         Ke = 0.5 * (Ke + np.transpose(Ke, (0, 2, 1)))
-        rows = np.repeat(dofs, p + 1, axis=1).ravel()
-        cols = np.tile(dofs, (1, p + 1)).ravel()
-        K = sp.csr_matrix((Ke.ravel(), (rows, cols)), shape=(self.size, self.size))
-        K.sum_duplicates()
-        K.sort_indices()
-        return K
+        return _assemble(Ke, dofs, self.size)
 
     @functools.cached_property
     def laplacian(self) -> sp.csr_matrix:
@@ -218,11 +223,7 @@ class BoundedAxis:
             B[~first] = gll.interpolation_matrix(p, xi[~first])
         else:
             B[:] = gll.interpolation_matrix(p, xi)
-        rows = np.repeat(np.arange(len(y)), p + 1)
-        cols = self.element_dofs[cell].ravel()
-        M = sp.csr_matrix((B.ravel(), (rows, cols)), shape=(len(y), self.size))
-        M.sum_duplicates()
-        return M
+        return _interpolation(B, self.element_dofs[cell], self.size)
 
     def lor(self) -> BoundedAxis:
         """The low-order refined axis: p = 1 on this axis' nodes."""
