@@ -98,6 +98,22 @@ class Cache:
         return self.rows.get(key)
 
 
+def _ade_solve(branch: str, v: float, m0: float, kbar: float):
+    """sharp_ref's membrane with ADE; where its anchor does not reach it (the pear below
+    m₀ ≈ 1.68 at v = 0.85), by continuation down in m₀ from 1.8 in steps of at most 0.04
+    (as studies/ade_plane.py follows it)."""
+    try:
+        return solve(branch, v, m0=m0, kbar=kbar)
+    except BranchError:
+        if branch != "pear" or m0 >= 1.8:
+            raise
+    steps = max(1, math.ceil((1.8 - m0) / 0.04))
+    result = None
+    for k in range(steps + 1):
+        result = solve(branch, v, m0=1.8 - (1.8 - m0) * k / steps, kbar=kbar, start=result)
+    return result
+
+
 def ade_sharp(cache: Cache, branch: str, v: float, m0: float, kbar: float,
               compute: bool = True) -> dict | None:
     """The sharp membrane with area-difference elasticity (κ̄/κ = ``kbar``, m₀), cached in
@@ -106,7 +122,7 @@ def ade_sharp(cache: Cache, branch: str, v: float, m0: float, kbar: float,
     if key not in cache.rows and compute:
         t0 = time.perf_counter()
         try:
-            solved = solve(branch, v, m0=m0, kbar=kbar).to_json()
+            solved = _ade_solve(branch, v, m0, kbar).to_json()
             row = {k: solved[k] for k in ("branch", "v", "w", "e", "da", "converged",
                                           "residual")}
             row["r"], row["z"] = ([round(x, 7) for x in solved[k]] for k in ("r", "z"))
@@ -179,10 +195,16 @@ FINE = (0.0128, 0.01)
 #: it is largest against the ε effect, which falls like ε², where ε is smallest)
 AXI_EPS = (0.04, 0.02, 0.01, 0.005, 0.0025)
 AXI_ORDER, AXI_NODES_PER_EPS, AXI_CHECK_NODES_PER_EPS = 8, 3.5, 2.5
+#: where an axisymmetric case stops: the sphere, whose exact constraints at v = 1 leave only
+#: a nearly free deformation (a prolate or oblate of vanishing excess), settles slowly: 2750
+#: steps at ε = 0.01, and its e is 1 + O(ε²) on any near-sphere
+AXI_STOP = {"sphere@1.0000": 0.01}
 #: stage ``ade`` (the ADE term as ε → 0, axisymmetric): (branch, v, m₀) at κ̄/κ = ADE_KBAR —
-#: a torus, a prolate and a pear with the area difference away from its relaxed value
+#: a torus, a prolate and a pear with the area difference away from its relaxed value (the
+#: pear near the prolate → pear transition, 1.531: at m₀ = 1.7 its neck pinches off in the
+#: phase field down to ε = 0.005)
 ADE_KBAR = 1.4
-ADE_CASES = (("torus", 0.65, 1.3), ("prolate", 0.85, 1.4), ("pear", 0.85, 1.6))
+ADE_CASES = (("torus", 0.65, 1.3), ("prolate", 0.85, 1.4), ("pear", 0.85, 1.58))
 #: stage ``transitions`` (axisymmetric): where the phase field's lowest branch changes at each
 #: ε, from seeded steady states on three points around the sharp transition — the minimal
 #: model's (upper branch, lower branch, v) and the ADE plane's prolate → pear at v = 0.85,
@@ -625,8 +647,9 @@ def run_eps(cache: Cache, out: Path, backend: str, plan, only=None, fine=()) -> 
         for eps in eps_of(plan, backend):
             key = _case_key(backend, branch, v, eps)
             axi = backend.startswith("axisymmetric")
+            stop = (AXI_STOP if axi else FINE_STOP).get(_key(branch, v), 0.0)
             if key in runs or (not axi and eps in FINE and _key(branch, v) not in fine) or (
-                    not axi and eps < FINE_STOP.get(_key(branch, v), 0.0)):
+                    eps < stop):
                 continue
             row = phase_field(sharp, branch, eps, backend)
             print(f"  {key}: e = {row['e']:.6f} (sharp {sharp['w']:.6f}), {row['label']}"
@@ -874,6 +897,20 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     plan = QUICK if args.quick else FULL
     fine = set(plan.fine if args.fine is None else args.fine)
+    lock = None
+    if not args.report_only:  # one process at a time: the caches are read, then rewritten
+        from fem_ade.lock import FolderLock
+
+        (args.out / "sharp").mkdir(parents=True, exist_ok=True)
+        lock = FolderLock(args.out / "sharp").acquire()
+    try:
+        return _main(args, plan, fine)
+    finally:
+        if lock is not None:
+            lock.release()
+
+
+def _main(args, plan, fine) -> dict:
     cache = Cache(args.out / "sharp" / "solves.json")
     if not args.report_only and "branches" in args.stages:
         if not args.quick:
