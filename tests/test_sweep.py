@@ -52,9 +52,9 @@ def test_sweep_file_and_points(tmp_path):
     """Axes as lists and as {start, stop, num}; one point per value and seed, named by its
     parameters; bad files refused in one line."""
     path = tmp_path / "a.toml"
-    path.write_text('base = "vesicle"\nseeds = ["prolate", "oblate"]\n[scene]\neps = 0.08\n'
+    path.write_text('base = "vesicle"\nseeds = ["prolate", "oblate"]\n[scene]\neps = 0.06\n'
                     '[axes]\nv = {start = 0.7, stop = 0.9, num = 3}\nkbar = [0.0]\n'
-                    '[run]\nn = 16\nsteps = 2\n')
+                    '[run]\nn = 24\nsteps = 2\n')
     sweep = load_sweep(path)
     names = [p.name for p in sweep.points()]
     assert sweep.axes["v"] == [0.7, 0.8, 0.9] and len(names) == 6
