@@ -34,7 +34,8 @@ kept): ``v`` (α = (4π/3)R₀³v), ``da0`` (ΔA₀ = 8πDR₀·Δa₀), ``kbar`
 The branch folder: ``points/NNNN/`` (``final.npz``: φ and its points; ``summary.json``: the
 point's parameter, E and its parts, V, A, ΔA, e = (W + G)/W_sphere, the φ = 0 surface's v
 and Δa, the label, the lowest eigenvalues and the unstable count, Newton's iterations),
-``branch.json`` (what the branch is: a resumed one must be the same), ``branch.csv`` (one
+``branch.json`` (what the branch is: a resumed one must be the same; its --to may differ, on
+the same side of --from: the branch goes on to it), ``branch.csv`` (one
 row per point: the parameter, e, E, W, G, unstable, label, fold, ...), ``branch.png`` (e
 against the parameter: stable solid, unstable dashed, folds marked) and ``shapes.png``
 (the meridians). Killed and started again with the same command, a branch goes on from its
@@ -374,6 +375,34 @@ def draw(out: Path, name: str, rows: list[dict], meridians: list) -> list[Path]:
     return paths
 
 
+def crossing(a: list[dict], b: list[dict], name: str) -> float | None:
+    """Where two branches' energies cross: the parameter at which e_a = e_b, or None if they
+    do not cross where both were followed. Each branch is taken up to its first fold (one e
+    per parameter value) and its e interpolated linearly between its points (with points
+    Δp ≈ 0.002 apart and e'' ~ 5: ~2e-6 in e); the crossing nearest the branches' start."""
+    def up_to_fold(rows):
+        out = rows[:2]
+        for r in rows[2:]:
+            if (r[name] - out[-1][name]) * (out[1][name] - out[0][name]) <= 0:
+                break
+            out.append(r)
+        out = sorted(out, key=lambda r: r[name])
+        return np.array([r[name] for r in out]), np.array([r["e"] for r in out])
+
+    if len(a) < 2 or len(b) < 2:
+        return None
+    (pa, ea), (pb, eb) = up_to_fold(a), up_to_fold(b)
+    grid = np.unique(np.concatenate([pa, pb]))
+    grid = grid[(grid >= max(pa[0], pb[0])) & (grid <= min(pa[-1], pb[-1]))]
+    if a[0][name] > a[1][name]:
+        grid = grid[::-1]  # from the start
+    d = np.interp(grid, pa, ea) - np.interp(grid, pb, eb)
+    for i in range(len(grid) - 1):
+        if d[i] == 0.0 or d[i] * d[i + 1] < 0:
+            return float(grid[i] - d[i] * (grid[i + 1] - grid[i]) / (d[i + 1] - d[i]))
+    return None
+
+
 # ---------------------------------------------------------------------------------------------
 # the driver
 # ---------------------------------------------------------------------------------------------
@@ -402,8 +431,11 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
                              until_steady=1e-9, max_steps=20000, scheme="stabilized",
                              constraints="exact", accelerate=True, backend_options=options)
     config.check(scene)
+    # what the points are (not where they stop: a branch run again with another --to on the
+    # same side goes on from its points, or stops where it had)
     identity = {"scene": scene.name, "params": scene.params.as_dict(), "param": param,
-                "from": start, "to": stop, "step": step, "n": config.n, "options": options}
+                "from": start, "direction": "up" if stop > start else "down", "step": step,
+                "n": config.n, "options": options}
     identity = json.loads(json.dumps(identity, default=str))
     out.mkdir(parents=True, exist_ok=True)
     lock = FolderLock(out).acquire()
@@ -450,6 +482,10 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
             if (p_k - stop) * direction >= 0:
                 say(f"reached {param} = {stop}")
                 break
+            if not same_branch(rows[0]["label"], last_row["label"]):
+                say(f"the branch ended at {param} = {p_k:.6g}: its shape became a "
+                    f"{last_row['label']} (a topology change)")
+                break
             be._set(phi_k, None)
             cont.set_p(p_k)
             if len(done) >= 2:  # the secant of the last two points
@@ -487,7 +523,7 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
             meridians.append((p, _curves(be)))
             say(_line(param, row))
             write_table(out, param, mark_folds(rows, param))
-            if not _same_branch(rows[0]["label"], row["label"]):
+            if not same_branch(rows[0]["label"], row["label"]):
                 say(f"the branch ends at {param} = {p:.6g}: its shape became a "
                     f"{row['label']} (a topology change)")
                 break
@@ -509,10 +545,14 @@ def _curves(be):
         return []
 
 
-def _same_branch(first, label) -> bool:
+def same_branch(first, label) -> bool:
+    """Whether a point's label is its branch's: the same sharp branch, where a prolate whose
+    waists multiply (gourd → chain: one body of genus 0, two necks) is no topology change
+    (seen at eps/R0 = 0.06-0.12 from v = 0.67 down)."""
     from .sharp import BRANCH_OF_LABEL
 
-    return BRANCH_OF_LABEL.get(first, first) == BRANCH_OF_LABEL.get(label, label)
+    family = {**BRANCH_OF_LABEL, "chain": "prolate"}
+    return family.get(first, first) == family.get(label, label)
 
 
 def _line(param, row) -> str:

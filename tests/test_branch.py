@@ -74,6 +74,25 @@ def test_a_stopped_branch_goes_on(branch, tmp_path):
         assert float(a["E"]) == pytest.approx(float(b["E"]), rel=1e-9)
 
 
+def test_a_branch_goes_further_with_another_end(branch, tmp_path):
+    """The same branch run again with a further --to keeps its points and goes on to it;
+    one that asks for the other side of --from, or another step, is another branch."""
+    import shutil
+
+    out = tmp_path / "further"
+    shutil.copytree(branch, out)
+    args = list(ARGS)
+    args[args.index("--to") + 1] = "0.85"
+    assert main([*args, "--out", str(out)]) == 0
+    whole, further = rows(branch), rows(out)
+    assert [r["E"] for r in further[:len(whole)]] == [r["E"] for r in whole]
+    assert float(further[-1]["v"]) <= 0.85 < float(whole[-1]["v"])
+    for change in (["--to", "0.97"], ["--step", "0.01"]):
+        args = list(ARGS)
+        args[args.index(change[0]) + 1] = change[1]
+        assert main([*args, "--out", str(out)]) == 2
+
+
 @pytest.mark.parametrize("extra, word", [
     (["--param", "da0"], "da0"), (["--step", "0"], "--step"),
     (["--to", "0.95"], "two different"),
@@ -86,3 +105,19 @@ def test_branch_mistakes_are_one_line(tmp_path, capsys, extra, word):
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and word in err, err
     assert not (tmp_path / "x").exists()
+
+
+def test_crossing_of_two_branches():
+    """Two branches with e linear in v cross where the lines do (exact for linear
+    interpolation), from either direction; past a fold a branch is not used; branches that
+    do not cross give None."""
+    from fem_ade.branch import crossing
+
+    v = np.linspace(0.70, 0.62, 9)
+    a = [{"v": x, "e": 1.8 - 4.0 * (x - 0.66)} for x in v]
+    b = [{"v": x, "e": 1.8 - 2.5 * (x - 0.66) + 0.003} for x in v[::2]]
+    assert crossing(a, b, "v") == pytest.approx(0.66 - 0.003 / 1.5, abs=1e-12)
+    assert crossing(a[::-1], b[::-1], "v") == pytest.approx(0.66 - 0.003 / 1.5, abs=1e-12)
+    folded = a[:5] + [{"v": 0.665, "e": 5.0}, {"v": 0.69, "e": 6.0}]
+    assert crossing(folded, b, "v") is None  # the part before the fold does not cross b
+    assert crossing(a, [{"v": x, "e": 9.0} for x in v], "v") is None
