@@ -860,9 +860,9 @@ def transitions_report(rows: list[dict], plan) -> list[str]:
     lines = ["", "## Where the lowest branch changes, from the phase field (axisymmetric FEM)",
              "", "Seeded steady states at three points around each sharp transition; at each "
              "ε the root of the difference of the two branches' e (a quadratic through the "
-             "points where both reached a steady state on their branch), then the observed order and Richardson "
-             "over the smallest ε. — : a branch left (opened, pinched or budded) at too many "
-             "of the points.", "",
+             "points where both reached a steady state on their branch), then the observed "
+             "order and Richardson over the smallest ε. — : a branch left (opened, pinched "
+             "or budded) at too many of the points.", "",
              "| transition | along | " + " | ".join(f"ε = {e:g}" for e in plan.transition_eps)
              + " | p | ε → 0 | sharp |", "|---|---|" + "---|" * (len(plan.transition_eps) + 3)]
     for r in rows:
