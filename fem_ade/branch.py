@@ -59,14 +59,19 @@ from .model import ModelError
 
 PARAMETERS = ("v", "da0", "kbar", "C")
 #: Newton iterations before a step is taken again at half the arclength; at most this many,
-#: and the next step is half as long again (a good predictor needs 4: measured at ε = 0.02)
-MAX_NEWTON, GROW_BELOW = 8, 4
+#: and the next step is half as long again (a good predictor needs 4 at ε = 0.02, 6-8 at
+#: 0.005, where the last iterations converge linearly: measured)
+MAX_NEWTON, GROW_BELOW = 12, 4
 #: the lowest eigenvalues computed at each point (stability), LOBPCG's iterations for them,
 #: and the eigenvalue (in units of P, Newton's bulk Hessian) below which a direction counts as
 #: unstable (the shape modes' are 1e-4 … 1e-2 in these units)
 EIGENVALUES, STABILITY_ITS, UNSTABLE = 4, 300, -1e-6
-#: a Newton correction is converged when its decrement (relative energy) is below this
-NEWTON_TOL = 1e-12
+#: a Newton correction is converged when its decrement (relative energy) is below this, and
+#: given up (a shorter step is tried) once its residual exceeds DIVERGED times its first: a
+#: diverging correction's bordered solves take the most MINRES iterations (5000 at eps =
+#: 0.005, where converging ones take 250-500); the converging ones measured there stay below
+#: their first residual
+NEWTON_TOL, DIVERGED = 1e-12, 2.0
 COLUMNS = ("point", "e", "E", "W", "G", "V", "A", "dA", "v_surface", "da_surface",
            "unstable", "lowest_eigenvalue", "label", "fold", "newton", "seconds")
 
@@ -180,9 +185,14 @@ class Continuation:
         phi_k, p_k = anchor
         t_phi, t_p = tangent
         self.set_p(p)
+        first = None
         for it in range(1, MAX_NEWTON + 1):
             lin = linearize(self.sys, phi)
             R = np.concatenate([lin.grad, lin.violation])
+            size = float(np.linalg.norm(R))
+            first = size if first is None else first
+            if not size <= DIVERGED * first:  # diverging: a shorter step, before the solves
+                return None
             Fp = self.parameter_derivative(phi, lin.lam)
             x1, _ = kkt_solve(self.sys, lin, -R)
             x2, _ = kkt_solve(self.sys, lin, -Fp)

@@ -32,6 +32,7 @@ STEPS = (
     ("readme_figure", ["studies/readme_figure.py", "--out", f"{RESULTS}/readme"]),
     ("sharp_limit", ["studies/sharp_limit.py", "--out", RESULTS]),
     ("ade_plane", ["studies/ade_plane.py", "--out", RESULTS]),
+    ("branches", ["studies/branches.py", "--out", RESULTS]),
     ("sweep_scaling", ["studies/sweep_scaling.py", "--out", RESULTS]),
     ("phase_diagram", ["studies/phase_diagram.py", "--out", RESULTS]),
 )

@@ -53,6 +53,19 @@ def check_hard_cases(rows, out):
             assert r["detail"], r
 
 
+def check_branches(result, out):
+    """The prolate and the oblate followed from v = 0.9 to 0.88; the oblate's and the
+    stomatocyte's seeds at v = 0.62, tori at eps = 0.04, excluded as not their branch (as
+    at eps = 0.02 in the study); no crossing; the report drawn."""
+    first, second = result["pairs"]
+    for pair in result["pairs"]:
+        assert pair["at"] == {"0.04": None}, pair
+    assert all(v is not None and v <= 0.8801 for v in first["last_v"].values()), first
+    assert all(v is None for v in second["last_v"].values()), second
+    assert all("not this branch" in why for why in second["ended"].values()), second
+    assert (out / "branches_quick.md").is_file() and (out / "branches_quick.png").is_file()
+
+
 def check_cost(result, out):
     """Every run in cost.json's format with a command that names its discretisation; the
     Pareto front is cheaper-and-worse to dearer-and-better; the time to an accuracy agrees
