@@ -264,7 +264,8 @@ def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
                  quiet: bool = True) -> NewtonResult:
     """Newton's method from the backend's current state to a steady state with V = α and
     A = β exactly (module docstring). Each iteration: the bordered system by MINRES (its
-    preconditioned residual below ``inner_tol``), then the step, halved until E falls by at
+    preconditioned residual below ``inner_tol``), then the step (reversed where it climbs,
+    i.e. along negative curvature: a saddle the flow crept to), halved until E falls by at
     least 1e-4 of the Newton decrement once the constraints are restored along P⁻¹∇V,
     P⁻¹∇A (Armijo; a full step where the quadratic model holds). Stops when the decrement
     is below ``tol``·|E|. The backend is left at the last state reached (its field, with
@@ -283,6 +284,8 @@ def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
         x, its = kkt_solve(sys_, lin, -np.concatenate([lin.grad, lin.violation]), inner_tol)
         gL, viol, lam = lin.grad, lin.violation, lin.lam
         dphi = x[:N]
+        if _dot(gL, dphi) > 0.0:  # negative curvature along the step: downhill instead
+            dphi = -dphi
         decrement = abs(_dot(gL, dphi)) / max(abs(E), 1e-300)
         result.krylov.append(its)
         result.decrement.append(decrement)
