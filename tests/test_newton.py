@@ -102,3 +102,30 @@ def test_bordered_solve_meets_its_tolerance_with_the_right_side_in_the_constrain
 
     assert its > 2
     assert m_norm(r) < 2e-8 * m_norm(rhs), (its, m_norm(r) / m_norm(rhs))
+
+
+def test_a_step_that_climbs_is_taken_downhill(monkeypatch):
+    """Where the Newton step climbs (∇Lᵀδφ > 0: negative curvature along it, met at a saddle
+    a flow crept to — the stomatocyte at v = 0.6, eps = 0.005) solve_steady takes it the other
+    way instead of giving up. Here the first step is made to climb by reversing it."""
+    import fem_ade.fem.newton as newton
+
+    scene = vesicle_scene(v=0.8, branch="oblate", eps=0.04)
+    be = make_backend("fem", scene, n=10, geometry="axisymmetric", scheme="stabilized",
+                      constraints="exact")
+    run_loop(be, dt=recipe("steady", scene)["dt"], until_steady=1e-4, max_steps=20000,
+             every=10, accelerate=True)
+    start = be.phi.copy()
+    reference = solve_steady(be)
+    be._set(start, None)
+    real, calls = newton.kkt_solve, []
+
+    def climbing(sys_, lin, rhs, inner_tol=1e-8):
+        x, its = real(sys_, lin, rhs, inner_tol)
+        calls.append(its)
+        return (-x if len(calls) == 1 else x), its
+
+    monkeypatch.setattr(newton, "kkt_solve", climbing)
+    result = solve_steady(be)
+    assert len(calls) > 1 and result.converged, result.message
+    assert result.E == pytest.approx(reference.E, rel=1e-10)
