@@ -486,15 +486,17 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
         for r, phi in done[-10:]:
             be._set(phi, None)
             meridians.append((r[param], _curves(be)))
-        while len(rows) < max_points:
+        while True:
             last_row, phi_k = rows[-1], done[-1][1]
             p_k = last_row[param]
+            if not same_branch(rows[0]["label"], last_row["label"]):  # also a resumed one's
+                say(f"the branch ends at {param} = {p_k:.6g}: its shape became a "
+                    f"{last_row['label']} (a topology change)")
+                break
             if (p_k - stop) * direction >= 0:
                 say(f"reached {param} = {stop}")
                 break
-            if not same_branch(rows[0]["label"], last_row["label"]):
-                say(f"the branch ended at {param} = {p_k:.6g}: its shape became a "
-                    f"{last_row['label']} (a topology change)")
+            if len(rows) >= max_points:
                 break
             be._set(phi_k, None)
             cont.set_p(p_k)
@@ -533,10 +535,6 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
             meridians.append((p, _curves(be)))
             say(_line(param, row))
             write_table(out, param, mark_folds(rows, param))
-            if not same_branch(rows[0]["label"], row["label"]):
-                say(f"the branch ends at {param} = {p:.6g}: its shape became a "
-                    f"{row['label']} (a topology change)")
-                break
             ds = row["ds_next"]
         rows = mark_folds(rows, param)
         write_table(out, param, rows)

@@ -77,8 +77,13 @@ def _num(text: str):
 
 
 def main(argv=None) -> dict:
+    import sys
+
     from fem_ade.branch import crossing, same_branch
     from fem_ade.output import write_json_atomic
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from sharp_limit import extrapolate
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=OUT)
@@ -116,9 +121,8 @@ def main(argv=None) -> dict:
             row["at"][f"{eps:g}"] = crossing(pair[0], pair[1], "v")
         have = [(e, row["at"][f"{e:g}"]) for e in eps_list if row["at"][f"{e:g}"] is not None]
         row["extrapolated"] = None
-        if len(have) >= 2:
-            (e1, x1), (e2, x2) = have[-2], have[-1]
-            row["extrapolated"] = x2 + (x2 - x1) * e2**2 / (e1**2 - e2**2)
+        if len(have) >= 2:  # p = 2 over the two smallest ε (sharp_limit's, given two)
+            row["extrapolated"] = extrapolate(*zip(*have[-2:], strict=True))[0]
         results.append(row)
         print(f"{name}: {row['at']} -> {row['extrapolated']} (sharp {row['sharp']})",
               flush=True)
