@@ -12,6 +12,7 @@ import json
 import math
 import os
 import platform
+import stat
 from importlib import metadata
 from pathlib import Path
 
@@ -42,6 +43,19 @@ def run_files(folder: Path) -> list[Path]:
     for pattern in RUN_GLOBS:
         found += sorted(folder.glob(pattern))
     return found
+
+
+def not_files(folder: Path) -> list[str]:
+    """The names of a run's files in ``folder`` that exist and are not regular files (a file
+    that vanishes while this looks — another run's atomic write — is not one of them)."""
+    odd = []
+    for p in run_files(folder):
+        try:
+            if not stat.S_ISREG(p.stat().st_mode):
+                odd.append(p.name)
+        except FileNotFoundError:
+            pass
+    return odd
 
 
 def contents(path: Path) -> list[Path]:
@@ -85,7 +99,7 @@ def check_out_dir(path: str | Path, *, force: bool = False) -> Path:
         if contents(path) and not force:
             raise ModelError(
                 f"output folder {path} exists and is not empty; use --force or another --out")
-        odd = [p.name for p in run_files(path) if not p.is_file()]
+        odd = not_files(path)
         if odd:
             raise ModelError(f"--out {path}: {', '.join(odd)} should be files of a run but are "
                              "not; remove them first")
@@ -141,7 +155,7 @@ def prepare_out_dir(path: Path, *, force: bool = False, fresh: bool = False):
         raise
     try:
         if force:
-            odd = [p.name for p in run_files(path) if not p.is_file()]
+            odd = not_files(path)
             if odd:
                 raise ModelError(f"--out {path}: {', '.join(odd)} should be files of a run but "
                                  "are not; remove them first")

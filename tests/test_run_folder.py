@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from fem_ade.lock import LOCK_NAME, OWNER_NAME
+from fem_ade import output
 from fem_ade.output import read_history
 from fem_ade.xdmf import read_series
 
@@ -70,6 +71,18 @@ def same_run(a: Path, b: Path) -> None:
 
 
 # --- ownership ------------------------------------------------------------------------------
+def test_a_file_that_vanishes_while_looked_at_is_not_odd(tmp_path, monkeypatch):
+    """The owner's atomic write (checkpoint.tmp.npz renamed away) may happen between the listing
+    of a folder and the look at each file: such a file is gone, not 'not a file' (CI once
+    refused a second run for that instead of naming the owner); a folder in a file's place is
+    odd."""
+    (tmp_path / "checkpoint.npz").mkdir()
+    listed = output.run_files(tmp_path)
+    monkeypatch.setattr(output, "run_files",
+                        lambda folder: [*listed, folder / "checkpoint.tmp.npz"])
+    assert output.not_files(tmp_path) == ["checkpoint.npz"]
+
+
 def test_second_run_on_the_same_folder_is_refused(tmp_path):
     """Two runs with the same --out: the second exits 2 with one line naming the owner; the
     folder ends as the first run's, whole (not a mix of both)."""
