@@ -418,9 +418,10 @@ def crossing(a: list[dict], b: list[dict], name: str) -> float | None:
 # ---------------------------------------------------------------------------------------------
 def follow(scene, *, param: str, start: float, stop: float, step: float, out: Path,
            backend_options: dict | None = None, n: int | None = None, quiet: bool = False,
-           max_points: int = 400) -> list[dict]:
+           max_points: int = 400, folds: int | None = None) -> list[dict]:
     """Follow the branch of ``scene``'s seed in ``param`` from ``start`` to ``stop`` (module
-    docstring); the rows of branch.csv."""
+    docstring); the rows of branch.csv. ``folds``: end the branch at the point after its
+    ``folds + 1``-th fold (0: the stable part from a stable start; None: go on past folds)."""
     from .backend import make_backend
     from .config import RunConfig
     from .fem.newton import solve_steady
@@ -435,6 +436,8 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
         raise ModelError(f"--from and --to must be two different numbers, got {start}, {stop}")
     if not (math.isfinite(step) and 0 < step <= abs(stop - start)):
         raise ModelError(f"--step must be in (0, |to - from|], got {step}")
+    if folds is not None and not (isinstance(folds, int) and folds >= 0):
+        raise ModelError(f"--folds must be a whole number >= 0, got {folds}")
     scene = replace(scene, params=set_parameter(scene.params, param, start))
     steady = recipe("steady", scene)
     config = RunConfig.build(scene, backend="fem", n=n, dt=steady["dt"],
@@ -497,6 +500,11 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
                 say(f"reached {param} = {stop}")
                 break
             if len(rows) >= max_points:
+                break
+            turned = sum(1 for r in mark_folds(rows, param) if r["fold"])
+            if folds is not None and turned > folds:
+                say(f"the branch ends after its fold at {param} = "
+                    f"{[r['fold'] for r in rows if r['fold']][-1]} (--folds {folds})")
                 break
             be._set(phi_k, None)
             cont.set_p(p_k)
@@ -585,6 +593,8 @@ def main(argv=None) -> int:
                     help="axisymmetric (the default and, for now, the only one)")
     ap.add_argument("--n", type=int, help="cells per L (default: from eps)")
     ap.add_argument("--order", type=int, help="element order (default 8)")
+    ap.add_argument("--folds", type=int, help="end the branch past this many folds (0: at "
+                    "the first; default: go on past folds)")
     ap.add_argument("--quiet", action="store_true")
     ves = ap.add_argument_group("the vesicle family")
     for name in ("v", "da0", "kbar", "C", "eps", "R0"):
@@ -611,7 +621,8 @@ def main(argv=None) -> int:
             scene = resolve_scene(args.scene)
         options = {} if args.order is None else {"order": args.order}
         follow(scene, param=args.param, start=args.start, stop=args.stop, step=args.step,
-               out=Path(args.out), backend_options=options, n=args.n, quiet=args.quiet)
+               out=Path(args.out), backend_options=options, n=args.n, quiet=args.quiet,
+               folds=args.folds)
     except ModelError as err:
         print(f"fem_ade.branch: error: {err}", file=sys.stderr)
         return 2

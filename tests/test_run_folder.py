@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fem_ade.lock import LOCK_NAME, OWNER_NAME
 from fem_ade import output
+from fem_ade.lock import LOCK_NAME, OWNER_NAME
 from fem_ade.output import read_history
 from fem_ade.xdmf import read_series
 
