@@ -67,6 +67,7 @@ from tqdm.auto import tqdm
 from .backend import Backend
 from .constraints import ConstraintError
 from .model import HISTORY_COLUMNS, ModelError, diagnose_blowup
+from .status import Status
 
 PHI_BOUND = 2.0
 
@@ -140,7 +141,7 @@ class RunResult:
 
     @property
     def exit_code(self) -> int:
-        codes = {"diverged": EXIT_DIVERGED, "interrupted": EXIT_INTERRUPTED}
+        codes = {Status.DIVERGED: EXIT_DIVERGED, Status.INTERRUPTED: EXIT_INTERRUPTED}
         return codes.get(self.status, EXIT_OK)
 
 
@@ -376,7 +377,7 @@ class SteadyState(Tracker):
         change = _relative_change(diag["E"], self.E_before, self.every)
         self.E_before = diag["E"]
         if change < self.tol:
-            return "steady", (f"steady at step {ls.k}: relative energy change per step "
+            return Status.STEADY, (f"steady at step {ls.k}: relative energy change per step "
                               f"{change:.3g} < {self.tol:g}")
         return None
 
@@ -531,11 +532,11 @@ def run_loop(
     if bad is not None:
         for tracker in trackers:
             tracker.close()
-        return result("diverged", "the state to start from is not finite", diag)
+        return result(Status.DIVERGED, "the state to start from is not finite", diag)
     if start is None:
         ls.last_E = diag["E"]
     last_diag = diag
-    status, message = "completed", ""
+    status, message = Status.COMPLETED, ""
     good, good_k = None, None
     try:
         for tracker in trackers:
@@ -548,7 +549,7 @@ def run_loop(
                 backend.set_state(good)
                 if stepper.retry(backend, ls):
                     continue
-                status = "diverged"
+                status = Status.DIVERGED
                 cause = diagnose_blowup(backend.scene.params, ls.dt, last_diag)
                 message = (f"diverged at step {ls.k + 1} (t = {ls.t + ls.dt:.4g}): {bad}; "
                            f"likely cause: {cause}. "
@@ -574,12 +575,12 @@ def run_loop(
                 break
         else:
             if until_steady is not None:
-                status = "max_steps"
+                status = Status.MAX_STEPS
                 message = f"not steady after max_steps = {total} steps"
     except KeyboardInterrupt:
         if good is not None and good_k == ls.k:
             backend.set_state(good)  # the interrupted step may be half done
-        status = "interrupted"
+        status = Status.INTERRUPTED
         message = f"interrupted at step {ls.k}"
         last_diag = backend.diagnostics()
         for tracker in trackers:
@@ -587,6 +588,6 @@ def run_loop(
     finally:
         for tracker in trackers:
             tracker.close()
-    if status == "completed":
+    if status == Status.COMPLETED:
         message = f"completed {ls.k} steps"
     return result(status, message + stepper.summary(ls), last_diag)

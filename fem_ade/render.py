@@ -36,6 +36,7 @@ import numpy as np
 
 from .model import Params
 from .shape import Surface, describe, extract_surface, summary_line
+from .status import Status
 
 ENGINES = ("auto", "vtk", "matplotlib")
 #: default camera: azimuth from +x towards +y, elevation above the xy-plane (degrees)
@@ -665,8 +666,8 @@ def run_label(summary: dict, n_grid: int) -> str:
     if summary.get("accelerate"):  # momentum: t is not a physical time
         when = f"{steps} iterations (momentum)"
     status = summary.get("status")
-    flag = "DIVERGED: last finite state" if status == "diverged" else (
-        "interrupted" if status == "interrupted" else "")
+    flag = "DIVERGED: last finite state" if status == Status.DIVERGED else (
+        "interrupted" if status == Status.INTERRUPTED else "")
     info = summary.get("backend_info") or {}
     order = info.get("order")
     grid = (f"p = {order}, {n_grid} nodes per axis" if order and summary.get("backend") == "fem"

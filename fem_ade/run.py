@@ -26,6 +26,7 @@ from .registry import (
     VESICLE_BRANCHES,
     VOLUMES,
 )
+from .status import Status
 
 EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED = 2, 3, 130
 #: the options --resume takes; every other one is stored in the run folder
@@ -436,7 +437,7 @@ def _report(scene, backend: str, result, out) -> int:
 
     f, p = result.final, scene.params
     line = f"{scene.name} [{backend}]: {result.message}"
-    if result.status == "interrupted":
+    if result.status == Status.INTERRUPTED:
         line += f"; continue with: python -m fem_ade.run --resume {out} [--steps N]"
     if result.exit_code:  # one line on stderr: what happened; the details on stdout
         print(f"fem_ade.run: {line}", file=sys.stderr)

@@ -43,6 +43,7 @@ from .output import (
     write_json_atomic,
 )
 from .scenes import Scene, scene_from_mapping, scene_to_mapping
+from .status import Status
 from .xdmf import XdmfSeries
 
 
@@ -634,7 +635,7 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
     grid = (phi_grid, None, None)
     try:
         result.shape, grid = be.describe_final(result.final, grid=phi_grid)
-        if result.shape is not None and result.status != "diverged":
+        if result.shape is not None and result.status != Status.DIVERGED:
             from .sharp import compare
 
             result.shape["sharp_reference"] = compare(be.scene.params, result.shape,

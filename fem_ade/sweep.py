@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .model import ModelError
+from .status import ENDED, Status
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -70,7 +71,6 @@ RUN_KEYS = {"recipe": str, "backend": str, "n": int, "dt": float, "steps": int,
 #: sweep's table is the uninterrupted one's, and each run's times are in its summary.json)
 COLUMNS = ("seed", "status", "steps", "E", "W", "G", "e", "label", "components", "genus",
            "v_surface", "da_surface", "e_sharp_seed", "sharp_end", "reason")
-FINISHED = ("completed", "steady", "max_steps", "diverged")
 
 
 @dataclass(frozen=True)
@@ -286,7 +286,7 @@ def run_point(point: Point, root: str) -> dict:
     failed = folder.with_name(point.name + ".failed.json")
     t0 = time.perf_counter()
     _write_json(folder.with_name(point.name + ".point.json"), point.identity())
-    if _status(folder) not in FINISHED:
+    if _status(folder) not in ENDED:
         failed.unlink(missing_ok=True)  # a failure of before is tried again
         try:
             if (folder / "checkpoint.npz").is_file() and (folder / "run.json").is_file():
@@ -429,7 +429,7 @@ def row(point: Point, root: Path) -> dict:
     failed = folder.with_name(point.name + ".failed.json")
     if failed.is_file():
         rec = json.loads(failed.read_text())
-        return {**out, "status": "failed", "reason": rec["reason"]}
+        return {**out, "status": Status.FAILED, "reason": rec["reason"]}
     try:
         s = json.loads((folder / "summary.json").read_text())
     except (OSError, ValueError):
@@ -463,7 +463,7 @@ def _row_of_summary(out: dict, s: dict, seed: dict) -> dict:
                v_surface=sharp.get("reduced_volume"),
                da_surface=sharp.get("reduced_area_difference"),
                e_sharp_seed=seed.get("e_sharp"), sharp_end=ref.get("e_sharp"),
-               reason="" if s["status"] != "diverged" else s.get("message", ""))
+               reason="" if s["status"] != Status.DIVERGED else s.get("message", ""))
     return out
 
 
@@ -551,7 +551,7 @@ def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | Non
                                      "seeds": sweep.seeds, "run": sweep.run,
                                      "points": [p.name for p in points]})
     rows = {p.name: row(p, out) for p in points}
-    done = (*FINISHED, "failed") if not retry_failed else FINISHED
+    done = ENDED | {Status.FAILED} if not retry_failed else ENDED
     todo = [p for p in points if rows[p.name]["status"] not in done]
     try:
         say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
@@ -597,7 +597,7 @@ def _drive(client, todo, out, rows, axes, quiet, retry_s, as_completed):
                                           pure=False))
                 continue
             rows[r["point"]] = r
-            failed += r["status"] in ("failed", "diverged")
+            failed += r["status"] in (Status.FAILED, Status.DIVERGED)
             bar.update(1)
             bar.set_postfix_str(f"failed {failed}, running {min(len(todo) - bar.n, n_workers)}")
             write_table(list(rows.values()), out / "sweep.csv", axes)
@@ -672,8 +672,8 @@ def main(argv=None) -> int:
     from .sweep_plot import draw
 
     pictures = draw(rows, sweep, out)
-    done = sum(r["status"] in FINISHED for r in rows)
-    bad = sum(r["status"] == "failed" for r in rows)
+    done = sum(r["status"] in ENDED for r in rows)
+    bad = sum(r["status"] == Status.FAILED for r in rows)
     print(f"{sweep.name}: {done} of {len(rows)} points finished, {bad} failed; "
           f"{out / 'sweep.csv'}" + "".join(f", {p}" for p in pictures))
     return 0 if done + bad == len(rows) else 1

@@ -15,11 +15,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .status import HAS_RESULT
+
 COLOURS = {"sphere": "#7f7f7f", "prolate": "#1f77b4", "cylinder": "#6baed6",
            "gourd": "#9ecae1", "chain": "#c6dbef", "oblate": "#ff7f0e", "discocyte": "#fdae6b",
            "torus": "#9467bd", "pear": "#d62728", "stomatocyte": "#2ca02c"}
 MARKERS = "osD^v<>ph"
-FINISHED = ("completed", "steady", "max_steps")
 
 
 def _colour(label: str | None) -> str:
@@ -73,13 +74,13 @@ def phase_diagram(rows: list[dict], sweep, path: Path) -> Path:
             branch = min(sharp)[1]
             ax.add_patch(plt.Rectangle((x - dx / 2, y - dy / 2), dx, dy, alpha=0.18,
                                        color=_colour(branch), lw=0))
-        done = [r for r in rs if r.get("status") in FINISHED and r.get("e") is not None]
+        done = [r for r in rs if r.get("status") in HAS_RESULT and r.get("e") is not None]
         best = min(done, key=lambda r: r["e"]) if done else None
         ends = {r.get("label") for r in done}
         for r in rs:
             i = seeds.index(r["seed"]) if r["seed"] in seeds else 0
             off = (i - (len(seeds) - 1) / 2) * dx * 0.22
-            label = r.get("label") if r.get("status") in FINISHED else None
+            label = r.get("label") if r.get("status") in HAS_RESULT else None
             labels_seen.add(label)
             ax.plot(x + off, y, MARKERS[i % len(MARKERS)], ms=9, mfc=_colour(label),
                     mec="black" if r is best else "0.5", mew=2.0 if r is best else 0.6)
@@ -129,12 +130,12 @@ def energy_diagram(rows: list[dict], sweep, path: Path, xkey: str) -> Path:
         if sharp:
             ax.plot(*zip(*sharp, strict=True), "-", color=_colour(s), lw=1.2)
         for r in mine:
-            if r.get("status") in FINISHED and r.get("e") is not None:
+            if r.get("status") in HAS_RESULT and r.get("e") is not None:
                 seen.add(r.get("label"))
                 ax.plot(r[xkey], r["e"], MARKERS[i % len(MARKERS)], ms=8,
                         mfc=_colour(r.get("label")), mec="0.4", mew=0.6)
     for x in sorted({r[xkey] for r in rows}):
-        done = [r for r in rows if r[xkey] == x and r.get("status") in FINISHED
+        done = [r for r in rows if r[xkey] == x and r.get("status") in HAS_RESULT
                 and r.get("e") is not None]
         if done:
             best = min(done, key=lambda r: r["e"])

@@ -55,6 +55,7 @@ import time
 from pathlib import Path
 
 from fem_ade.render import compact_png
+from fem_ade.status import Status
 
 DT_FACTORS = (100, 30, 10, 3, 1)
 VARIANTS = {  # name: (penalty factor or None for exact, label)
@@ -137,7 +138,7 @@ def find_dt(
                 **common_kwargs(name, variant, n, extra, allow),
             )
             rises = energy_rises(r.history)
-            ok = r.status != "diverged" and rises == 0
+            ok = r.status != Status.DIVERGED and rises == 0
             Es = [float(h["E"]) for h in r.history]
             rel = [(b - a) / abs(a) for a, b in zip(Es, Es[1:], strict=False)]
             entry = {
@@ -148,7 +149,7 @@ def find_dt(
                 "rises": rises,
                 "ok": ok,
                 "ms_per_step": 1e3 * r.wall_s / max(r.steps, 1),
-                "message": r.message if r.status == "diverged" else "",
+                "message": r.message if r.status == Status.DIVERGED else "",
                 "max_rise_rel": max(rel, default=math.nan),
                 "E_first": Es[0] if Es else math.nan,
                 "E_last": Es[-1] if Es else math.nan,
@@ -275,7 +276,7 @@ def _dt_trial_table(out_root: Path) -> list[str]:
 
 def fallback_dt(log: list[dict]) -> float:
     """No Δt passed: the non-diverged trial with the fewest E_M rises (ties: the largest Δt)."""
-    runs = [e for e in log if e["status"] == "completed"]
+    runs = [e for e in log if e["status"] == Status.COMPLETED]
     if not runs:
         return math.nan
     return min(runs, key=lambda e: (e["rises"], -e["dt"]))["dt"]
@@ -579,7 +580,7 @@ def _targets(alpha, beta, delta_A0, D):
 def _outcome(e: dict) -> str:
     if e["ok"]:
         return "ok"
-    if e["status"] == "completed":
+    if e["status"] == Status.COMPLETED:
         return f"E rose at {e['rises']} records"
     return e["status"]
 
@@ -624,7 +625,7 @@ def _row(c: dict, rel: str) -> str:
     genus = sh.get("genus")
     genus = ",".join(str(g) for g in genus) if isinstance(genus, list) else genus
     status = c["status"]
-    if status == "max_steps":
+    if status == Status.MAX_STEPS:
         status = f"max_steps ({c.get('max_steps')})"
     dt = f"{c['dt']:.3g} ({c['dt_factor']:g}×)"
     if not c.get("dt_passed", True):

@@ -59,6 +59,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_ade.render import compact_png, save_figure
+from fem_ade.status import ENDED, Status
 
 #: the committed gallery (its verdicts also go to fem_ade/verdicts.json when it is --out)
 RESULTS = Path(__file__).resolve().parent / "results" / "gallery"
@@ -147,7 +148,6 @@ def case_dir(root: Path, case: dict) -> Path:
     return run_dir(root, case["variant"], case["backend"], case["scene"])
 
 
-FINISHED = ("completed", "steady", "max_steps", "diverged")
 
 
 def _status(folder: Path) -> str | None:
@@ -159,7 +159,7 @@ def _status(folder: Path) -> str | None:
 
 
 def _finished(folder: Path) -> bool:
-    return _status(folder) in FINISHED
+    return _status(folder) in ENDED
 
 
 def _run(scene, folder: Path, kwargs: dict, quiet: bool):
@@ -252,7 +252,7 @@ def slim(folder: Path) -> None:
 def _stop_if_interrupted(folder: Path) -> None:
     """A run stopped by a signal (Ctrl-C) keeps its checkpoint for the next sitting: it is
     not analysed or slimmed, and the gallery stops."""
-    if _status(folder) == "interrupted":
+    if _status(folder) == Status.INTERRUPTED:
         print(f"  {folder}: interrupted; `studies/gallery.py` resumes it", flush=True)
         raise KeyboardInterrupt
 
@@ -265,7 +265,7 @@ def run_case(root: Path, case: dict, *, quiet: bool, keep: bool) -> dict:
     kept = json.loads((root / ARCHIVE).read_text()) if (root / ARCHIVE).is_file() else {}
     entry = kept.get(_key(case["variant"], case["backend"], case["scene"]))
     if entry is not None and not (folder / "analysis.json").is_file() and (
-            case["variant"] == "a" or entry.get("status") != "steady" or "kick" in entry):
+            case["variant"] == "a" or entry.get("status") != Status.STEADY or "kick" in entry):
         return {k: v for k, v in entry.items() if k != "kick"}
     if (folder / "analysis.json").is_file() and (
             case["variant"] == "a" or (folder / "kick" / "analysis.json").is_file()):
@@ -274,7 +274,7 @@ def run_case(root: Path, case: dict, *, quiet: bool, keep: bool) -> dict:
     _run(scene, folder, case["kwargs"], quiet)
     _stop_if_interrupted(folder)
     result = analyse(folder, scene)
-    if case["variant"] != "a" and result["status"] == "steady":
+    if case["variant"] != "a" and result["status"] == Status.STEADY:
         kick = folder / "kick"
         kw = dict(case["kwargs"], perturb=KICK[0], seed=KICK[1], phi0=str(folder),
                   ic="consistent")
@@ -521,7 +521,7 @@ def verdict(a: dict | None, paper: str, variant: str) -> str:
     if a is None:
         return "not run"
     label = _label(a)
-    if a["status"] == "diverged":
+    if a["status"] == Status.DIVERGED:
         return f"diverged at step {a['steps']}"
     if variant == "a":  # a fixed number of steps at the paper's Δt: never called steady
         seen = [r for r in a.get("shapes", []) if r["label"] == paper]
@@ -533,7 +533,7 @@ def verdict(a: dict | None, paper: str, variant: str) -> str:
             t0, t1 = float(seen[0]["t"]), float(seen[-1]["t"])
             return f"transient: {paper} for t in [{t0:.2g}, {t1:.2g}], then {label}"
         return f"not seen by {t} ({label} at the end)"
-    if a["status"] != "steady":
+    if a["status"] != Status.STEADY:
         return f"not converged ({label} after {a['steps']} steps)"
     kick = a.get("kick")
     stable = None
@@ -808,7 +808,7 @@ def phase_diagram(root: Path, data, names) -> Path | None:
         ax.plot([v0], [m0], "x", color=colours[n], ms=9, mew=2, label=n)
         for v, mk in marks.items():
             a = data.get((v, "spectral", n))
-            if a and a.get("shape") and a["status"] == "steady":
+            if a and a.get("shape") and a["status"] == Status.STEADY:
                 sh = a["shape"]
                 ax.plot([sh["reduced_volume"]], [sh["reduced_area_difference"]], mk,
                         color=colours[n], ms=7, mfc="none" if v.endswith("-loc") else colours[n])

@@ -22,6 +22,7 @@ import numpy as np
 from fem_ade.backend import make_backend
 from fem_ade.loop import run_loop
 from fem_ade.scenes import PAPER_SCENES
+from fem_ade.status import Status
 
 CASES = [  # label, backend options, Δt factor, steps
     ("paper 1×", {}, 1, 300),
@@ -47,7 +48,7 @@ def outcome(scene, backend: str, n: int, options: dict, factor: float, steps: in
     r = run_loop(be, dt=dt, steps=steps, every=10)
     E = np.array([h["E"] for h in r.history])
     rises = int(np.sum(np.diff(E) > 1e-12 * np.abs(E[1:])))
-    if r.status == "diverged":
+    if r.status == Status.DIVERGED:
         cause = r.message.split("likely cause: ")[1]
         detail = cause.split(":")[0] if cause.startswith("explicit area") else cause.split(" (")[0]
     else:

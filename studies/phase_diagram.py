@@ -21,7 +21,8 @@ import math
 from pathlib import Path
 
 from fem_ade.sharp import BRANCH_OF_LABEL
-from fem_ade.sweep import FINISHED, Sweep, load_sweep, read_table, row, run_sweep
+from fem_ade.status import ENDED, HAS_RESULT, Status
+from fem_ade.sweep import Sweep, load_sweep, read_table, row, run_sweep
 from fem_ade.sweep_plot import draw
 
 HERE = Path(__file__).resolve().parent
@@ -49,7 +50,7 @@ def lowest(rows: list[dict], keys: list[str]) -> dict:
         at = tuple(r[k] for k in keys)
         cell = out.setdefault(at, {"pf": None, "e": math.inf, "sharp": None,
                                    "e_sharp": math.inf, "ends": set()})
-        if r.get("status") in FINISHED and r.get("status") != "diverged" and \
+        if r.get("status") in HAS_RESULT and \
                 r.get("e") is not None:
             cell["ends"].add(r.get("label"))
             if r["e"] < cell["e"]:
@@ -84,8 +85,8 @@ def notes(name: str, sweep: Sweep, rows: list[dict], out: Path) -> list[str]:
     for c in cells.values():
         c["sharp_all"] = ("torus" if c["e_torus"] is not None and c["e_torus"] < c["e_sharp"]
                           else c["sharp"])
-    done = sum(r.get("status") in FINISHED for r in rows)
-    failed = [r for r in rows if r.get("status") == "failed"]
+    done = sum(r.get("status") in ENDED for r in rows)
+    failed = [r for r in rows if r.get("status") == Status.FAILED]
     lines = [f"## {name}", "",
              f"`studies/sweeps/{name}.toml`{' (--quick)' if sweep.name != name else ''}: "
              f"{len(rows)} runs ({len(cells)} points × "

@@ -55,6 +55,7 @@ import numpy as np
 from fem_ade.output import write_json_atomic
 from fem_ade.render import save_figure
 from fem_ade.sharp import SPHERE_W, reduced_energy  # a sharp sphere's W (model units, per κ)
+from fem_ade.status import Status
 from sharp_ref.branches import solve
 from sharp_ref.membrane import BranchError
 
@@ -838,7 +839,7 @@ def transition_rows(cache: Cache, runs: dict, plan) -> list[dict]:
             xs, ds = [], []
             for x, ku, kl in points:
                 ru, rl = runs.get(ku(eps)), runs.get(kl(eps))
-                if ru and rl and all(r["kept_branch"] and r.get("status") == "steady"
+                if ru and rl and all(r["kept_branch"] and r.get("status") == Status.STEADY
                                      for r in (ru, rl)):  # a run cut at max_steps: no point
                     xs.append(x)
                     ds.append(ru["e"] - rl["e"])

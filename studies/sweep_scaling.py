@@ -28,6 +28,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from fem_ade.status import Status
 from fem_ade.sweep import Sweep, run_sweep
 
 DEFAULT_OUT = Path("runs/studies")
@@ -95,7 +96,7 @@ def measure(plan, how: str, workers: int, scratch: Path) -> dict:
         p.terminate()
         p.wait(timeout=60)
     tasks = [r["task_s"] for r in rows if "task_s" in r]
-    assert len(tasks) == len(rows) and all(r["status"] == "completed" for r in rows), rows
+    assert len(tasks) == len(rows) and all(r["status"] == Status.COMPLETED for r in rows), rows
     n = len(rows)
     work = wall if how == "external" else wall - start  # run_sweep starts its own cluster
     return {"how": how, "workers": workers, "points": n, "wall_s": wall, "startup_s": start,

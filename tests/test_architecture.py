@@ -175,3 +175,20 @@ def test_sharp_reference_imports_nothing_of_the_phase_field():
                     assert a.name.split(".")[0] in {"numpy", "scipy", "math", "argparse",
                                                     "json", "sys", "warnings", "signal",
                                                     "threadpoolctl"}, (m, a.name)
+
+
+def test_one_definition_of_the_run_status():
+    """How a run ended is fem_ade.status's Status; which statuses count as ended or as having
+    a result is defined there only (the sweep, its plots and the gallery once had three
+    different 'finished' sets)."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    names = ("completed", "steady", "max_steps", "diverged", "interrupted")
+    together = re.compile(r'[(\[{]\s*"(%s)"\s*,\s*"(%s)"' % ("|".join(names), "|".join(names)))
+    found = [f"{p.relative_to(root)}:{text.count(chr(10), 0, m.start()) + 1}"
+             for p in [*(root / "fem_ade").rglob("*.py"), *(root / "studies").rglob("*.py")]
+             if p.name != "status.py"
+             for text in [p.read_text()] for m in together.finditer(text)]
+    assert not found, found
