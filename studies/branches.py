@@ -14,7 +14,8 @@ with p = 2 (the order every kept branch shows in ``sharp_limit.md``) over
 the two smallest ε with a crossing. The folds (turning points in v) of every branch are
 reported: where a branch ends at finite ε.
 
-Writes ``OUT/branches.md``, ``OUT/branches.json`` and ``OUT/branches.png``; the branch
+Writes ``OUT/branches.md``, ``OUT/branches.json``, ``OUT/branches.png`` and
+``OUT/branches/minimal.json`` (the transitions, ε = 0 for the extrapolation); the branch
 folders in ``OUT/branches/EPS/NAME`` (their ``points/`` are not committed) — resumable, as
 ``fem_ade.branch`` is: a finished branch is read back, a stopped one goes on.
 
@@ -129,8 +130,24 @@ def main(argv=None) -> dict:
     payload = {"eps": list(eps_list), "pairs": results}
     suffix = "_quick" if args.quick else ""
     write_json_atomic(args.out / f"branches{suffix}.json", payload)
+    write_json_atomic(base / f"minimal{suffix}.json", minimal(payload))
     write_report(args.out, payload, curves, suffix)
     return payload
+
+
+def minimal(payload: dict) -> dict:
+    """The transitions as issue 32 asks for them: one entry per (pair, ε) with a crossing and
+    one with ``eps`` = 0 for the extrapolation (``{"transitions": [{"from", "to", "eps",
+    "v"}, ...]}``), the sharp value beside each."""
+    out = []
+    for r in payload["pairs"]:
+        upper, lower = r["transition"].split(" → ")
+        found = [(float(e), x) for e, x in r["at"].items() if x is not None]
+        if r["extrapolated"] is not None:
+            found.append((0.0, r["extrapolated"]))
+        out += [{"from": upper, "to": lower, "eps": e, "v": x, "R0": r["R0"],
+                 "sharp": r["sharp"]} for e, x in found]
+    return {"transitions": out}
 
 
 def write_report(out: Path, payload: dict, curves: dict, suffix: str = "") -> None:
