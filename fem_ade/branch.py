@@ -113,6 +113,22 @@ def check_parameter(params, name: str) -> None:
                          "scene (give --C, e.g. 0.0 is not on: use a small value)")
 
 
+def check_branch(params, param: str, start, stop, step, folds=None) -> None:
+    """A branch's settings (ModelError, one line): the parameter (:func:`check_parameter`),
+    two different ends, a step in (0, |to − from|], folds a whole number ≥ 0 or None."""
+    check_parameter(params, param)
+    def number(x):
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+    if not (number(start) and number(stop)) or start == stop:
+        raise ModelError(f"--from and --to must be two different numbers, got {start}, {stop}")
+    if not (number(step) and 0 < step <= abs(stop - start)):
+        raise ModelError(f"--step must be in (0, |to - from|], got {step}")
+    if folds is not None and (isinstance(folds, bool) or not isinstance(folds, int)
+                              or folds < 0):
+        raise ModelError(f"--folds must be a whole number >= 0, got {folds}")
+
+
 # ---------------------------------------------------------------------------------------------
 # continuation
 # ---------------------------------------------------------------------------------------------
@@ -431,13 +447,7 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
 
     say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
     options = {"geometry": "axisymmetric", **(backend_options or {})}
-    check_parameter(scene.params, param)
-    if not (math.isfinite(start) and math.isfinite(stop) and start != stop):
-        raise ModelError(f"--from and --to must be two different numbers, got {start}, {stop}")
-    if not (math.isfinite(step) and 0 < step <= abs(stop - start)):
-        raise ModelError(f"--step must be in (0, |to - from|], got {step}")
-    if folds is not None and not (isinstance(folds, int) and folds >= 0):
-        raise ModelError(f"--folds must be a whole number >= 0, got {folds}")
+    check_branch(scene.params, param, start, stop, step, folds)
     scene = replace(scene, params=set_parameter(scene.params, param, start))
     steady = recipe("steady", scene)
     config = RunConfig.build(scene, backend="fem", n=n, dt=steady["dt"],

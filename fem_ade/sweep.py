@@ -21,6 +21,20 @@ and the run's options::
     max_steps = 20
     constraints = "exact"
 
+With a ``[branch]`` table each point is a branch followed by continuation
+(:func:`fem_ade.branch.follow`, axisymmetric) instead of a run: its parameter must be neither
+fixed nor swept, ``[run]`` may set only ``n`` and ``backend_options`` (e.g. the order)::
+
+    [branch]
+    param = "v"                           # v, da0, kbar or C
+    from = 0.95                           # the first point (the seed's steady state)
+    to = 0.8
+    step = 0.01                           # the arclength step (default 0.01)
+    folds = 0                             # optional: end past this many folds
+
+Its row is the branch's last point (``steps``: its number of points; ``end``: the
+parameter there; ``folds``: where it turned); one branch per Dask task.
+
 Each point (one value per axis and one seed) is one run folder ``OUT/points/NAME`` (NAME from
 its parameters, e.g. ``v=0.7_seed=prolate``), run by :func:`run_point` on a Dask worker: a
 ``LocalCluster`` of ``--workers`` processes (one thread each) by default, or the scheduler at
@@ -50,7 +64,7 @@ import re
 import signal
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from .model import ModelError
@@ -83,13 +97,22 @@ class Point:
     fixed: dict
     seed: object
     run: dict = field(default_factory=dict)
+    #: a branch point's continuation (param, from, to, step, folds), or None: a run
+    branch: dict | None = None
 
     def scene(self):
         from .scenes import resolve_scene, vesicle_scene
 
+        start = {self.branch["param"]: self.branch["from"]} if self.branch else {}
         if self.base == "vesicle":
-            return vesicle_scene(**self.fixed, **self.values, branch=self.seed)
-        return resolve_scene(self.base).with_(**self.fixed, **self.values)
+            return vesicle_scene(**self.fixed, **self.values, **start, branch=self.seed)
+        scene = resolve_scene(self.base).with_(**self.fixed, **self.values)
+        if self.branch:
+            from .branch import set_parameter
+
+            scene = replace(scene, params=set_parameter(scene.params, self.branch["param"],
+                                                        self.branch["from"]))
+        return scene
 
     def identity(self) -> dict:
         """What this point is: its base, fixed and swept parameters, seed, run options and
@@ -97,10 +120,11 @@ class Point:
         same; the resolved scene and configuration follow from them)."""
         from .model import PHYSICS_VERSION
 
-        return json.loads(json.dumps({"base": self.base, "fixed": self.fixed,
-                                      "values": self.values, "seed": self.seed,
-                                      "run": self.run, "physics": PHYSICS_VERSION},
-                                     sort_keys=True, default=str))
+        what = {"base": self.base, "fixed": self.fixed, "values": self.values,
+                "seed": self.seed, "run": self.run, "physics": PHYSICS_VERSION}
+        if self.branch:  # (absent for a run: the folders of before stay theirs)
+            what["branch"] = self.branch
+        return json.loads(json.dumps(what, sort_keys=True, default=str))
 
     def options(self, scene) -> dict:
         from .runs import recipe
@@ -129,6 +153,7 @@ class Sweep:
     fixed: dict
     seeds: list
     run: dict
+    branch: dict | None = None
 
     def points(self) -> list[Point]:
         names = list(self.axes)
@@ -139,7 +164,7 @@ class Sweep:
                 label = "_".join([f"{k}={_fmt(v)}" for k, v in values.items()]
                                  + [f"seed={seed}"])
                 out.append(Point(label, self.base, values, dict(self.fixed), seed,
-                                 dict(self.run)))
+                                 dict(self.run), dict(self.branch) if self.branch else None))
         return out
 
 
@@ -162,7 +187,7 @@ def load_sweep(path: str | Path) -> Sweep:
         raise ModelError(f"cannot read sweep file {path}: {err}") from None
     except tomllib.TOMLDecodeError as err:
         raise ModelError(f"malformed TOML in {path}: {err}") from None
-    known = {"name", "base", "seeds", "scene", "axes", "run"}
+    known = {"name", "base", "seeds", "scene", "axes", "run", "branch"}
     unknown = set(data) - known
     if unknown:
         raise ModelError(f"unknown key(s) {', '.join(sorted(unknown))} in {path}; valid: "
@@ -227,9 +252,54 @@ def load_sweep(path: str | Path) -> Sweep:
             run[key] = float(value)
         elif not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
             raise ModelError(f"run.{key} must be of type {kind.__name__}, got {value!r}")
-    sweep = Sweep(str(data.get("name", path.stem)), base, axes, dict(fixed), seeds, run)
+    branch = _branch_table(data.get("branch"), fixed, axes, run)
+    sweep = Sweep(str(data.get("name", path.stem)), base, axes, dict(fixed), seeds, run, branch)
     check_sweep(sweep)
     return sweep
+
+
+#: a [branch] table's keys (their types) and the [run] options a branch sweep takes
+BRANCH_KEYS = {"param": str, "from": float, "to": float, "step": float, "folds": int}
+BRANCH_RUN_KEYS = ("n", "backend_options")
+
+
+def _branch_table(table, fixed: dict, axes: dict, run: dict) -> dict | None:
+    """The [branch] table, checked for its form (its values by :func:`check_sweep`)."""
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise ModelError("[branch] must be a table")
+    unknown = sorted(set(table) - set(BRANCH_KEYS))
+    if unknown:
+        raise ModelError(f"unknown key(s) {', '.join(unknown)} in [branch]; valid: "
+                         f"{', '.join(BRANCH_KEYS)}")
+    missing = [k for k in ("param", "from", "to") if k not in table]
+    if missing:
+        raise ModelError(f"[branch] needs {', '.join(missing)}")
+    out = {"step": 0.01, "folds": None, **table}
+    for key, kind in BRANCH_KEYS.items():
+        value = out[key]
+        if key == "folds" and value is None:
+            continue
+        if kind is float and isinstance(value, int) and not isinstance(value, bool):
+            out[key] = value = float(value)
+        if not isinstance(value, kind) or isinstance(value, bool):
+            raise ModelError(f"branch.{key} must be of type {kind.__name__}, got {value!r}")
+    from .branch import PARAMETERS
+
+    if out["param"] not in PARAMETERS:
+        raise ModelError(f"branch.param (--param) must be one of {', '.join(PARAMETERS)}, "
+                         f"got {out['param']!r}")
+    where = "[scene]" if out["param"] in fixed else "[axes]" if out["param"] in axes else None
+    if where:
+        raise ModelError(f"{out['param']} is the branch's parameter ([branch] from, to); it "
+                         f"cannot be in {where} too")
+    other = sorted(set(run) - set(BRANCH_RUN_KEYS))
+    if other:
+        raise ModelError(f"run option(s) {', '.join(other)}: a branch sweep's [run] takes "
+                         f"only {', '.join(BRANCH_RUN_KEYS)} (each point is Newton's "
+                         "continuation, not a run)")
+    return out
 
 
 def check_sweep(sweep: Sweep) -> None:
@@ -256,6 +326,16 @@ def check_sweep(sweep: Sweep) -> None:
         except ModelError as err:
             raise ModelError(f"point {point.name}: {err}") from None
     first = points[0]
+    if sweep.branch:
+        from .branch import check_branch
+
+        b = sweep.branch
+        try:
+            check_branch(first.scene().params, b["param"], b["from"], b["to"], b["step"],
+                         b["folds"])
+        except (ModelError, TypeError) as err:
+            raise ModelError(f"point {first.name}: {err}") from None
+        return
     try:
         scene = first.scene()
         kw = first.options(scene)
@@ -289,7 +369,9 @@ def run_point(point: Point, root: str) -> dict:
     if _status(folder) not in ENDED:
         failed.unlink(missing_ok=True)  # a failure of before is tried again
         try:
-            if (folder / "checkpoint.npz").is_file() and (folder / "run.json").is_file():
+            if point.branch:
+                _follow(point, folder)
+            elif (folder / "checkpoint.npz").is_file() and (folder / "run.json").is_file():
                 resume(folder, quiet=True)
             else:
                 scene = point.scene()
@@ -304,6 +386,22 @@ def run_point(point: Point, root: str) -> dict:
             _write_json(failed, {"point": point.name, "reason": f"{type(err).__name__}: {err}",
                                  "seconds": round(time.perf_counter() - t0, 2)})
     return {**row(point, Path(root)), "task_s": time.perf_counter() - t0}
+
+
+def _follow(point: Point, folder: Path) -> None:
+    """A branch point: the branch followed (or gone on with, after a kill) in ``folder``,
+    then its summary.json (status ``completed``: it is not followed again)."""
+    from .branch import follow
+
+    b = point.branch
+    rows = follow(point.scene(), param=b["param"], start=b["from"], stop=b["to"],
+                  step=b["step"], out=folder, n=point.run.get("n"),
+                  backend_options=point.run.get("backend_options"), quiet=True,
+                  folds=b["folds"])
+    last = rows[-1]
+    _write_json(folder / "summary.json", {
+        "status": Status.COMPLETED, "branch": b, "points": len(rows), "end": last[b["param"]],
+        "folds": [r["fold"] for r in rows if r.get("fold")], "last": last})
 
 
 def changed(point: Point, root: Path) -> str | None:
@@ -443,6 +541,8 @@ def row(point: Point, root: Path) -> dict:
     if not isinstance(seed, dict):
         seed = {}
     try:
+        if "branch" in s:
+            return _row_of_branch(out, s)
         return _row_of_summary(out, s, seed)
     except (KeyError, TypeError, ValueError, AttributeError) as err:
         return {**out, "status": "damaged",
@@ -467,6 +567,15 @@ def _row_of_summary(out: dict, s: dict, seed: dict) -> dict:
     return out
 
 
+def _row_of_branch(out: dict, s: dict) -> dict:
+    last = s["last"]
+    out.update(status=s["status"], steps=s["points"], end=s["end"],
+               folds=" ".join(str(f) for f in s["folds"]),
+               **{k: last.get(k) for k in ("E", "W", "G", "e", "label", "v_surface",
+                                          "da_surface")})
+    return out
+
+
 def _seed_sharp_e(point: Point) -> float | None:
     """The sharp energy of the seed's branch at the point (vesicle family), if it exists
     (the solve that seeded it, cached in this process)."""
@@ -483,6 +592,8 @@ def _seed_sharp_e(point: Point) -> float | None:
 # ---------------------------------------------------------------------------------------
 def write_table(rows: list[dict], path: Path, axes: list[str]) -> None:
     cols = ["point", *axes, *COLUMNS]
+    if any("end" in r for r in rows):  # a branch sweep's
+        cols[cols.index("steps") + 1:cols.index("steps") + 1] = ["end", "folds"]
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
@@ -507,7 +618,7 @@ def read_table(path: Path) -> list[dict]:
 
     with open(path, newline="") as fh:
         return [{k: parse(v) if k not in ("point", "seed", "genus", "label", "status",
-                                          "reason") else v for k, v in r.items()}
+                                          "reason", "folds") else v for k, v in r.items()}
                 for r in csv.DictReader(fh)]
 
 
@@ -549,6 +660,7 @@ def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | Non
     _write_json(out / "sweep.json", {"name": sweep.name, "base": sweep.base,
                                      "axes": sweep.axes, "scene": sweep.fixed,
                                      "seeds": sweep.seeds, "run": sweep.run,
+                                     **({"branch": sweep.branch} if sweep.branch else {}),
                                      "points": [p.name for p in points]})
     rows = {p.name: row(p, out) for p in points}
     done = ENDED | {Status.FAILED} if not retry_failed else ENDED
@@ -671,7 +783,7 @@ def main(argv=None) -> int:
         return 130
     from .sweep_plot import draw
 
-    pictures = draw(rows, sweep, out)
+    pictures = [] if sweep.branch else draw(rows, sweep, out)  # each branch draws its own
     done = sum(r["status"] in ENDED for r in rows)
     bad = sum(r["status"] == Status.FAILED for r in rows)
     print(f"{sweep.name}: {done} of {len(rows)} points finished, {bad} failed; "

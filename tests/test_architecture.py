@@ -186,7 +186,8 @@ def test_one_definition_of_the_run_status():
 
     root = Path(__file__).resolve().parents[1]
     names = ("completed", "steady", "max_steps", "diverged", "interrupted")
-    together = re.compile(r'[(\[{]\s*"(%s)"\s*,\s*"(%s)"' % ("|".join(names), "|".join(names)))
+    one = "(" + "|".join(names) + ")"
+    together = re.compile(r'[(\[{]\s*"' + one + r'"\s*,\s*"' + one + '"')
     found = [f"{p.relative_to(root)}:{text.count(chr(10), 0, m.start()) + 1}"
              for p in [*(root / "fem_ade").rglob("*.py"), *(root / "studies").rglob("*.py")]
              if p.name != "status.py"

@@ -265,6 +265,71 @@ BAD_SWEEPS = [
 ]
 
 
+#: a branch sweep: each point a prolate followed in v (issue 32), two sizes
+BRANCH_SWEEP = """
+name = "b"
+base = "vesicle"
+seeds = ["prolate"]
+[scene]
+eps = 0.05
+[axes]
+R0 = [0.18, 0.2]
+[branch]
+param = "v"
+from = 0.95
+to = 0.92
+step = 0.02
+"""
+#: its mistakes: (what is wrong, the change, a word of the message)
+BAD_BRANCH_SWEEPS = [
+    ("the parameter swept", lambda t: t.replace("R0 = [0.18, 0.2]", "v = [0.9]"), "cannot be"),
+    ("a run option", lambda t: t + '[run]\nrecipe = "steady"\n', "takes only"),
+    ("an unknown key", lambda t: t.replace("step = 0.02", "stride = 0.02"), "unknown key"),
+    ("no end", lambda t: t.replace("to = 0.92\n", ""), "needs to"),
+    ("folds below 0", lambda t: t + "folds = -1\n", "--folds"),
+    ("a step too long", lambda t: t.replace("step = 0.02", "step = 0.5"), "--step"),
+    ("a word as the end", lambda t: t.replace("to = 0.92", 'to = "low"'), "branch.to"),
+    ("an unknown parameter", lambda t: t.replace('param = "v"', 'param = "R0"'), "--param"),
+]
+
+
+def test_a_sweep_of_branches(tmp_path, capsys):
+    """With [branch] each point is a branch followed by continuation: its folder is the
+    branch folder, its row the last point (steps = its points, end = its v), and run again
+    the sweep skips it; another [branch] end is another point (refused, as a changed run)."""
+    path = tmp_path / "b.toml"
+    path.write_text(BRANCH_SWEEP)
+    out = tmp_path / "out"
+    assert main([str(path), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    rows = _table(out / "sweep.csv")
+    assert [r["status"] for r in rows] == ["completed"] * 2
+    for r in rows:
+        branch = _table(out / "points" / r["point"] / "branch.csv")
+        assert int(r["steps"]) == len(branch) >= 2
+        assert r["end"] == branch[-1]["v"] and r["e"] == branch[-1]["e"]
+        assert float(r["end"]) <= 0.92
+    assert rows[0]["e"] != rows[1]["e"]  # two sizes: two branches
+    capsys.readouterr()
+    assert main([str(path), "--out", str(out), "--workers", "1"]) == 0
+    assert "2 done, 0 to run" in capsys.readouterr().out
+    assert _table(out / "sweep.csv") == rows
+    path.write_text(BRANCH_SWEEP.replace("to = 0.92", "to = 0.9"))
+    assert main([str(path), "--out", str(out), "--workers", "1", "--quiet"]) == 2
+    assert "other settings" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("case", BAD_BRANCH_SWEEPS, ids=[c[0] for c in BAD_BRANCH_SWEEPS])
+def test_bad_branch_sweeps_are_one_line(tmp_path, capsys, case):
+    _, change, word = case
+    path = tmp_path / "b.toml"
+    path.write_text(change(BRANCH_SWEEP))
+    out = tmp_path / "out"
+    code = main([str(path), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and word in err, err
+    assert not out.exists(), "a refused sweep wrote something"
+
+
 @pytest.mark.parametrize("case", BAD_SWEEPS, ids=[c[0] for c in BAD_SWEEPS])
 def test_bad_sweeps_are_one_line_before_anything_runs(tmp_path, capsys, case):
     _, change, word = case
