@@ -230,21 +230,6 @@ def physical_memory() -> float:
         return math.inf
 
 
-def fft_workers() -> int:
-    """Threads of scipy's FFTs: ``FEM_ADE_FFT_WORKERS`` (e.g. 1 for a background job beside
-    other work), else all cores (-1); ModelError for a value that is not -1 or a positive
-    integer."""
-    text = os.environ.get("FEM_ADE_FFT_WORKERS", "-1").strip()
-    try:
-        workers = int(text)
-    except ValueError:
-        workers = 0
-    if workers == 0 or workers < -1:
-        raise ModelError(f"FEM_ADE_FFT_WORKERS must be a positive integer (threads of the "
-                         f"FFTs) or -1 (all cores), got {text!r}")
-    return workers
-
-
 def check_choice(what: str, value, valid) -> None:
     """ModelError "unknown WHAT 'value'; valid: ..." unless ``value`` is in ``valid``."""
     if value not in valid:

@@ -56,6 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from .model import ModelError
+from .threads import limit_threads
 
 PARAMETERS = ("v", "da0", "kbar", "C")
 #: Newton iterations before a step is taken again at half the arclength; at most this many,
@@ -432,6 +433,7 @@ def crossing(a: list[dict], b: list[dict], name: str) -> float | None:
 # ---------------------------------------------------------------------------------------------
 # the driver
 # ---------------------------------------------------------------------------------------------
+@limit_threads
 def follow(scene, *, param: str, start: float, stop: float, step: float, out: Path,
            backend_options: dict | None = None, n: int | None = None, quiet: bool = False,
            max_points: int = 400, folds: int | None = None) -> list[dict]:

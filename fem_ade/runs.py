@@ -44,6 +44,7 @@ from .output import (
 )
 from .scenes import Scene, scene_from_mapping, scene_to_mapping
 from .status import Status
+from .threads import limit_threads
 from .xdmf import XdmfSeries
 
 
@@ -85,6 +86,7 @@ def recipe(name: str, scene: Scene) -> dict:
     return kw
 
 
+@limit_threads
 def simulate(
     scene: Scene,
     *,
@@ -284,6 +286,7 @@ def default_out(scene_name: str, backend: str) -> Path:
     return Path("runs") / f"{scene_name}-{backend}-{stamp}-{secrets.token_hex(2)}"
 
 
+@limit_threads
 def resume(out: str | Path, *, steps: int | None = None, quiet: bool = True,
            with_config: bool = False):
     """Continue the run in ``out`` from its checkpoint up to step ``steps`` (default: as before).

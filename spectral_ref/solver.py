@@ -26,9 +26,10 @@ import math
 import numpy as np
 from scipy import fft
 
-from fem_ade.backend import BackendBase, fft_workers
+from fem_ade.backend import BackendBase
 from fem_ade.constraints import ConstraintError
 from fem_ade.model import ModelError
+from fem_ade.threads import fft_workers
 from fem_ade.xdmf import closed_grid_values, grid_mesh
 
 SQRT2 = math.sqrt(2.0)

@@ -411,13 +411,14 @@ def _mesh_variant(tmp_path, kind):
 
 
 @pytest.mark.parametrize("case", ["FEM_ADE_FFT_WORKERS=abc", "FEM_ADE_FFT_WORKERS=0",
+                                  "FEM_ADE_BLAS_THREADS=0", "FEM_ADE_BLAS_THREADS=two",
                                   "rtol 1e-300", "index out of range", "duplicated cell",
                                   "shifted"])
 def test_run_mistakes_are_one_line_and_write_nothing(tmp_path, capsys, monkeypatch, case):
     out = tmp_path / "out"
     args = ["discocyte", *SMALL, "--steps", "2", "--out", out]
     if case.startswith("FEM_ADE"):
-        monkeypatch.setenv("FEM_ADE_FFT_WORKERS", case.split("=")[1])
+        monkeypatch.setenv(*case.split("="))
         args += ["--backend", "spectral"]
     elif case == "rtol 1e-300":
         args += ["--solver", "jacobi", "--rtol", "1e-300"]

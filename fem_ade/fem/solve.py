@@ -266,7 +266,7 @@ class Eigenbasis:
         if self.fourier:
             from scipy import fft
 
-            from ..backend import fft_workers
+            from ..threads import fft_workers
 
             self.fft, self.workers = fft, fft_workers()
             lams = []

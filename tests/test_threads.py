@@ -1,0 +1,45 @@
+"""Threads set once, on purpose (fem_ade.threads): one BLAS thread during a run unless
+FEM_ADE_BLAS_THREADS says otherwise, in numpy's library and scipy's both."""
+
+import pytest
+from threadpoolctl import threadpool_info
+
+from fem_ade.model import ModelError
+from fem_ade.threads import blas_threads, limit_threads, limited
+
+
+def _blas_threads() -> set[int]:
+    return {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+
+
+def test_a_run_uses_one_blas_thread_by_default(monkeypatch):
+    import scipy.linalg  # noqa: F401 (both libraries loaded)
+    from threadpoolctl import threadpool_limits
+
+    monkeypatch.delenv("FEM_ADE_BLAS_THREADS", raising=False)
+    assert blas_threads() == 1
+
+    @limit_threads
+    def inside():
+        return _blas_threads()
+
+    with threadpool_limits(limits=2, user_api="blas"):  # as if the library chose 2
+        assert _blas_threads() == {2}
+        with limited():
+            assert _blas_threads() == {1}
+        assert inside() == {1}
+        assert _blas_threads() == {2}  # and back after the run
+
+
+def test_the_environment_chooses_the_blas_threads(monkeypatch):
+    before = _blas_threads()
+    monkeypatch.setenv("FEM_ADE_BLAS_THREADS", "all")
+    assert blas_threads() is None
+    with limited():
+        assert _blas_threads() == before
+    monkeypatch.setenv("FEM_ADE_BLAS_THREADS", "2")
+    assert blas_threads() == 2
+    for bad in ("0", "-1", "two", ""):
+        monkeypatch.setenv("FEM_ADE_BLAS_THREADS", bad)
+        with pytest.raises(ModelError, match="FEM_ADE_BLAS_THREADS"):
+            blas_threads()
