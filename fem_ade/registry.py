@@ -19,7 +19,7 @@ SCHEMES = {
 #: constant c (docs/model.md §7), and "seeded", the paper's figure's shape (fem_ade.seeds)
 IC_VARIANTS = ("consistent", "printed", "seeded")
 #: the branches a vesicle of the ``vesicle`` scene family can start on (fem_ade.vesicle)
-VESICLE_BRANCHES = ("prolate", "oblate", "stomatocyte", "pear", "sphere")
+VESICLE_BRANCHES = ("prolate", "oblate", "stomatocyte", "pear", "torus", "sphere")
 
 #: how V = α and A = β are enforced
 CONSTRAINTS = {

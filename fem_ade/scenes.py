@@ -273,7 +273,7 @@ VESICLE_PARAMS = frozenset({"eps", "alpha", "beta", "delta_A0", "kappa_bar", "C"
 def vesicle_scene(**kw) -> Scene:
     """The ``vesicle`` family (:mod:`fem_ade.vesicle`): a vesicle of reduced volume ``v``,
     relaxed area difference ``da0``, ``kbar`` = κ̄/κ, spontaneous curvature ``C``, width
-    ``eps``, seeded on ``branch`` (prolate, oblate, stomatocyte, pear, sphere)."""
+    ``eps``, seeded on ``branch`` (prolate, oblate, stomatocyte, pear, torus, sphere)."""
     from .vesicle import vesicle_parts
 
     return Scene(**vesicle_parts(**kw)).validate()

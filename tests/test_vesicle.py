@@ -118,3 +118,13 @@ def test_the_command_line_knows_every_vesicle_parameter():
     from fem_ade.vesicle import Vesicle
 
     assert set(VESICLE_OPTIONS) == set(Vesicle.__dataclass_fields__) - {"L"}
+
+
+def test_a_vesicle_seeded_on_the_torus():
+    """The torus is a branch of the family (the ADE plane's lowest at v <= 0.75): its seed
+    is the sharp torus's tube, a closed meridian off the axis."""
+    from fem_ade.scenes import vesicle_scene
+
+    scene = vesicle_scene(v=0.65, branch="torus", kbar=1.4, da0=1.2, eps=0.05)
+    assert not scene.ic.spheroidal and min(scene.ic.r) > 0.1
+    assert "seeded from the sharp shape (torus)" in scene.description
