@@ -108,8 +108,9 @@ BACKENDS = {
                    "at the Gauss-Lobatto-Legendre points, --n cells per axis, so p*n nodes per "
                    "axis; a mesh file takes 1 or 2"),
             Option("mesh", str, None, None,
-                   "a periodic hexahedral mesh file (read with meshio), or graded[:g] for a "
-                   "graded tensor mesh (default: uniform, n cells per direction)"),
+                   "a periodic hexahedral mesh file (read with meshio), graded[:g][@c] for a "
+                   "tensor mesh graded toward c (grading g in [0, 1)), or uniform (the "
+                   "default: n cells per direction)"),
             Option("solver", str, "auto", FEM_SOLVERS,
                    "how the step's system is solved: auto (default: fdm on tensor meshes, "
                    "else chebyshev where the system is mass-dominated on near-uniform cells, "
@@ -122,12 +123,12 @@ BACKENDS = {
                    "the exact solvers fdm and fft take none)"),
             Option("linalg", str, "numpy", LINALGS,
                    "numpy (default: one process) or petsc (PETSc KSP + hypre/GAMG, the mesh "
-                   "distributed over the ranks of mpirun; README 'Running on a cluster')"),
+                   "distributed over the ranks of mpirun; docs/cluster.md)"),
             Option("geometry", str, "cartesian", GEOMETRIES,
                    "cartesian (default: the periodic box) or axisymmetric: a shape that is a "
                    "surface of revolution about a vertical axis, on its meridional half-plane "
-                   "(r, z) with the measure 2 pi r dr dz (docs/model.md §11; order 4, --n and "
-                   "a mesh graded to the membrane by default, from eps)"),
+                   "(r, z) with the measure 2 pi r dr dz (docs/model.md §11; by default order 8, "
+                   "a mesh graded to the membrane and --n from eps: 2.5 nodes per eps)"),
             Option("domain", str, None, None,
                    "axisymmetric: the half-plane R,z0,z1 (r <= R, z0 <= z <= z1; default "
                    "L/sqrt(pi),0,L: the box's volume and height)"),

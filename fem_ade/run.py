@@ -169,7 +169,7 @@ def list_scenes() -> str:
 
     verdicts = gallery_verdicts()
     lines = ["paper scenes (docs/model.md §7; under each, what the gallery found: "
-             "studies/gallery.py, variants a-d in README 'The paper's gallery'):"]
+             "studies/gallery.py, variants a-d in docs/results.md):"]
     for s in PAPER_SCENES.values():
         lines.append(f"  {s.name:16s} {s.figure:9s} eps={s.params.eps:<5g} dt={s.dt:<6g} "
                      f"n={s.n:<4d} {s.description}")

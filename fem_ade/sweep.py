@@ -39,7 +39,7 @@ Each point (one value per axis and one seed) is one run folder ``OUT/points/NAME
 its parameters, e.g. ``v=0.7_seed=prolate``), run by :func:`run_point` on a Dask worker: a
 ``LocalCluster`` of ``--workers`` processes (one thread each) by default, or the scheduler at
 ``--scheduler ADDRESS`` (or the scheduler's JSON file: one started by ``dask scheduler`` /
-``dask worker``, ``dask-mpi`` or dask-jobqueue on Slurm/PBS; README "Phase diagrams").
+``dask worker``, ``dask-mpi`` or dask-jobqueue on Slurm/PBS; docs/cluster.md).
 Killed at any moment and started again, a sweep skips the finished points, resumes those with
 a checkpoint and never runs a point twice at once (the run folder's lock: a point whose
 folder another process holds is waited for). A point that fails (bad parameters, an error)

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# PETSc and MPI for `--linalg petsc` (README: "Running on a cluster").
+# PETSc and MPI for `--linalg petsc` (docs/cluster.md).
 #
 # Debian/Ubuntu: PETSc 3.18 from the distribution (with hypre, GAMG, OpenMPI), petsc4py built
 # against it (Debian's own python3-petsc4py works only with Debian's numpy 1.x), and mpi4py.

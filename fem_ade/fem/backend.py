@@ -32,8 +32,8 @@ class FEMBackend(BackendBase):
 
     - ``order``: p, 1 to 16 on tensor meshes (GLL nodes and quadrature; p·n nodes per axis),
       1 or 2 on a mesh file;
-    - ``mesh``: None/"uniform" (n cells per side), "graded[:g]" (smooth periodic grading,
-      largest/smallest cell (1 + g)/(1 − g), g = 0.3), a mesh file path (meshio; opposite
+    - ``mesh``: None/"uniform" (n cells per side), "graded[:g][@c]" (smooth periodic grading
+      toward c, largest/smallest cell (1 + g)/(1 − g), g = 0.3), a mesh file path (meshio; opposite
       faces must carry matching nodes) or a :class:`fem_ade.fem.mesh.PeriodicMesh`;
     - ``solver``: "auto" (default) | "fdm" | "fft" | "amg" | "chebyshev" | "jacobi"
       (:mod:`fem_ade.fem.solve`);
