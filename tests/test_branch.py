@@ -144,3 +144,38 @@ def test_a_fold_on_the_phase_field_oblate(tmp_path):
     assert float(table[k - 1]["v"]) > folds[0] and float(table[-1]["v"]) > folds[0]
     assert all(r["unstable"] == "0" for r in table[:k])
     assert table[-1]["unstable"] == "1" and float(table[-1]["lowest_eigenvalue"]) < 0
+
+
+def test_stability_equals_a_dense_eigensolve(branch):
+    """The lowest eigenvalues of H_L v = λPv on {Cᵀv = 0} (fem_ade.branch.stability) are
+    those of the dense problem built column by column from the same operators and restricted
+    to the constraints' null space by QR (LOBPCG, used before, missed eigenvalues near zero)."""
+    import scipy.linalg as sla
+
+    from fem_ade.branch import stability
+    from fem_ade.fem.newton import NewtonSystem, linearize
+
+    scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05)
+    n = json.loads((branch / "branch.json").read_text())["n"]
+    be = make_backend("fem", scene, n=n, geometry="axisymmetric", scheme="stabilized",
+                      constraints="exact")
+    point = json.loads((branch / "points" / "0002" / "summary.json").read_text())
+    be.stepper.params = be.params = set_parameter(be.params, "v", point["v"])
+    with np.load(branch / "points" / "0002" / "final.npz") as z:
+        be._set(np.array(z["phi"]), None)
+    sys_ = NewtonSystem(be)
+    lin = linearize(sys_, be.phi.copy())
+    N, p = be.phi.size, be.params
+    eye = np.eye(N)
+    H = np.column_stack([sys_.step.hessian_vector(lin.phi, lin.mu, lin.Kphi, e)
+                         + sys_.step.constraint_hessian_vector(lin.phi, lin.Kphi, e,
+                                                               *lin.lam[:2]) for e in eye])
+    K = np.column_stack([be.space.K @ e for e in eye])
+    w = be.space.weights
+    P = (4 * p.kappa / p.eps**3) * np.diag(w) + (4 * p.kappa / p.eps) * K \
+        + p.kappa * p.eps * K @ (K / w[:, None])
+    Q, _ = np.linalg.qr(np.column_stack(lin.C), mode="complete")
+    Z = Q[:, len(lin.C):]
+    dense = sla.eigh(Z.T @ (0.5 * (H + H.T)) @ Z, Z.T @ P @ Z, eigvals_only=True,
+                     subset_by_index=[0, 3])
+    assert stability(be) == pytest.approx(dense, rel=1e-6, abs=1e-9)
