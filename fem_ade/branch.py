@@ -19,8 +19,9 @@ and θ makes the first tangent's field and parameter parts equal. Δs halves whe
 not converge in ``MAX_NEWTON`` iterations and grows by 1.5 where it takes ≤ 4, between
 ``--step``/8 and 4·``--step``. A fold (turning point) is where the tangent's t_p changes
 sign; its parameter is the extremum of the quadratic through the three points around it.
-The branch ends at ``--to``, at a topology change (the shape's label leaves the branch's:
-an oblate opening into a torus, a neck closing) or where Δs falls below its least.
+The branch ends at ``--to``, at a topology change (:func:`same_topology`: an oblate opening
+into a torus, a neck closing into two vesicles; a genus-0 shape whose label changes — pear to
+gourd, discocyte to stomatocyte — goes on) or where Δs falls below its least.
 
 Stability: at each point the few lowest eigenvalues of the Hessian of the Lagrangian on the
 constraints' tangent space, H_L v = λ P v with Cᵀv = 0 (ARPACK on the projected operator, P⁻¹
@@ -505,7 +506,7 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
         while True:
             last_row, phi_k = rows[-1], done[-1][1]
             p_k = last_row[param]
-            if not same_branch(rows[0]["label"], last_row["label"]):  # also a resumed one's
+            if not same_topology(rows[0]["label"], last_row["label"]):  # a resumed one's too
                 say(f"the branch ends at {param} = {p_k:.6g}: its shape became a "
                     f"{last_row['label']} (a topology change)")
                 break
@@ -572,6 +573,22 @@ def _curves(be):
         return [c.copy() for c in meridians(be).curves]
     except Exception:  # noqa: BLE001 (a picture's curves, never the branch's numbers)
         return []
+
+
+def same_topology(first, label) -> bool:
+    """Whether a point's shape has its branch's topology: one body of genus 0 (whatever its
+    label: a prolate that grows a second waist, a pear whose label flips to gourd, an oblate
+    whose dimples deepen into a stomatocyte are each still one branch), a torus, or the same
+    label otherwise (two vesicles, nested)."""
+    from .sharp import BRANCH_OF_LABEL
+
+    def kind(text):
+        if text == "torus":
+            return "torus"
+        genus0 = BRANCH_OF_LABEL.get(text) in ("prolate", "oblate", "stomatocyte", "pear")
+        return "one body of genus 0" if genus0 or text in ("chain", "sphere") else text
+
+    return kind(first) == kind(label)
 
 
 def same_branch(first, label) -> bool:

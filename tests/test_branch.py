@@ -179,3 +179,16 @@ def test_stability_equals_a_dense_eigensolve(branch):
     dense = sla.eigh(Z.T @ (0.5 * (H + H.T)) @ Z, Z.T @ P @ Z, eigvals_only=True,
                      subset_by_index=[0, 3])
     assert stability(be) == pytest.approx(dense, rel=1e-6, abs=1e-9)
+
+
+def test_a_branch_ends_at_a_change_of_topology_not_of_label():
+    """A genus-0 shape whose label changes (pear → gourd, discocyte → stomatocyte, gourd →
+    chain) is the same branch; opening into a torus or pinching into two vesicles ends it."""
+    from fem_ade.branch import same_topology
+
+    for a, b in (("pear", "gourd"), ("discocyte", "stomatocyte"), ("gourd", "chain"),
+                 ("prolate", "cylinder"), ("torus", "torus"), ("2 vesicles", "2 vesicles")):
+        assert same_topology(a, b), (a, b)
+    for a, b in (("oblate", "torus"), ("pear", "2 vesicles"), ("stomatocyte", "nested"),
+                 ("2 vesicles", "gourd")):
+        assert not same_topology(a, b), (a, b)
