@@ -14,9 +14,11 @@ kicked run that ends lower, or as another shape, refutes it (the point is unstab
 kick was large enough to leave its basin: a saddle of the full 3D problem either way for
 the axisymmetric lowest branch's claim).
 
-The points: where the seed-based 3D ADE sweep (``studies/results/phase_diagram/ade``)
-ended in non-axisymmetric shapes (starfish) while the sharp lowest is axisymmetric — the
-candidates for a non-axisymmetric instability — and two controls where it did not.
+The points: two controls (a prolate and an oblate far from any transition, where the
+seed-based 3D ADE sweep, ``studies/results/phase_diagram/ade``, ended axisymmetric), then
+the two where that sweep ended in non-axisymmetric shapes (starfish-3 at v = 0.7,
+Δa₀ = 1.64; starfish-4 at v = 0.8, Δa₀ = 1.64) while the sharp lowest there is axisymmetric
+(prolate; pear) — the candidates for a non-axisymmetric instability.
 
 Writes ``OUT/nonaxisymmetric.md`` and ``.json``; the 3D run folders in
 ``OUT/nonaxisymmetric/`` (not committed; a finished run is read back).
@@ -36,8 +38,8 @@ from pathlib import Path
 
 OUT = Path("runs") / "studies"
 #: (v, Δa₀ of the grid, branch) of the ADE plane's lines
-CASES = ((0.7, 1.64, "prolate"), (0.8, 1.64, "prolate"), (0.85, 1.04, "prolate"),
-         (0.8, 0.8, "oblate"))
+CASES = ((0.85, 1.04, "prolate"), (0.8, 0.8, "oblate"), (0.7, 1.64, "prolate"),
+         (0.8, 1.64, "pear"))
 QUICK_CASES = ((0.85, 1.1, "prolate"),)
 KICK = 0.1
 #: a kicked run ends "the same" as its control when its e is within this (relative) and its
@@ -107,10 +109,19 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     suffix = "_quick" if args.quick else ""
     lines = args.out / f"ade_branches{suffix}"
+    if args.quick and not lines.is_dir():  # the quick ADE line first (a minute)
+        import sys
+
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from ade_branches import main as ade_branches
+
+        ade_branches(["--quick", "--out", str(args.out)])
     base = args.out / f"nonaxisymmetric{suffix}"
     rows = []
     for v, da0, branch in (QUICK_CASES if args.quick else CASES):
         line = lines / f"v={v:g}" / branch
+        if not line.is_dir():  # the pear's lines: up and down from where it starts
+            line = line.with_name(f"{branch}-up")
         t0 = time.perf_counter()
         row, phi = point_of(line, da0)
         scene, n = revolved(line, row, phi)

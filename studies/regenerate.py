@@ -33,6 +33,8 @@ STEPS = (
     ("sharp_limit", ["studies/sharp_limit.py", "--out", RESULTS]),
     ("ade_plane", ["studies/ade_plane.py", "--out", RESULTS]),
     ("branches", ["studies/branches.py", "--out", RESULTS]),
+    ("ade_branches", ["studies/ade_branches.py", "--out", RESULTS]),
+    ("nonaxisymmetric", ["studies/nonaxisymmetric.py", "--out", RESULTS]),
     ("sweep_scaling", ["studies/sweep_scaling.py", "--out", RESULTS]),
     ("phase_diagram", ["studies/phase_diagram.py", "--out", RESULTS]),
 )

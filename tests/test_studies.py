@@ -66,6 +66,25 @@ def check_branches(result, out):
     assert (out / "branches_quick.md").is_file() and (out / "branches_quick.png").is_file()
 
 
+def check_ade_branches(result, out):
+    """One line at v = 0.85, eps = 0.04: the prolate and the oblate followed in Δa₀ over
+    1.04 … 1.16, the prolate the lowest at both grid points as the sharp one is; the report
+    and its picture written."""
+    assert [p["pf"] for p in result["points"]] == ["prolate", "prolate"]
+    assert all(p["pf"] == p["sharp"] for p in result["points"])
+    assert all(e is not None for p in result["points"] for e in p["e_pf"].values())
+    assert (out / "ade_branches_quick.md").is_file() and (out / "ade-branches_quick.png").is_file()
+
+
+def check_nonaxisymmetric(result, out):
+    """A prolate point of the quick ADE line revolved into 3D: the 3D control lands within
+    1e-3 of the axisymmetric e (eps = 0.04 both), the kicked run back on it."""
+    (row,) = result["rows"]
+    assert abs(row["control"]["e"] / row["e_axisymmetric"] - 1) < 1e-3, row
+    assert row["same"] and row["verdict"] == "stable to the kick", row
+    assert (out / "nonaxisymmetric_quick.md").is_file()
+
+
 def check_cost(result, out):
     """Every run in cost.json's format with a command that names its discretisation; the
     Pareto front is cheaper-and-worse to dearer-and-better; the time to an accuracy agrees
