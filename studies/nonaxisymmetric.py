@@ -18,20 +18,25 @@ The points: two controls (a prolate and an oblate far from any transition, where
 seed-based 3D ADE sweep, ``studies/results/phase_diagram/ade``, ended axisymmetric), then
 the two where that sweep ended in non-axisymmetric shapes (starfish-3 at v = 0.7,
 Δa₀ = 1.64; starfish-4 at v = 0.8, Δa₀ = 1.64) while the sharp lowest there is axisymmetric
-(prolate; pear) — the candidates for a non-axisymmetric instability.
+(prolate; pear) — the candidates for a non-axisymmetric instability (the pear at Δa₀ = 1.58:
+at 1.64 its neck is closed at ε = 0.01).
 
 Writes ``OUT/nonaxisymmetric.md`` and ``.json``; the 3D run folders in
-``OUT/nonaxisymmetric/`` (not committed; a finished run is read back).
+``OUT/nonaxisymmetric/[eps=EPS/]`` (their summary.json and run.json committed; a finished run
+is read back, a stopped one resumed from its checkpoint).
 
-    python studies/nonaxisymmetric.py --out studies/results    # ~1 h (3D at 128³)
-    python studies/nonaxisymmetric.py --quick                  # the code, ε = 0.04
+    python studies/nonaxisymmetric.py --out studies/results --eps 0.02   # ~20 min (64³)
+    python studies/nonaxisymmetric.py --quick                            # ε = 0.04
+
+At the lines' own ε = 0.01 (128³) one kicked run took more than 20 min of this machine
+(stopped at step 890, not yet steady): the committed check runs the points' membranes at
+ε = 0.02, the same R₀, v and Δa₀ (``--eps``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -39,7 +44,7 @@ from pathlib import Path
 OUT = Path("runs") / "studies"
 #: (v, Δa₀ of the grid, branch) of the ADE plane's lines
 CASES = ((0.85, 1.04, "prolate"), (0.8, 0.8, "oblate"), (0.7, 1.64, "prolate"),
-         (0.8, 1.64, "pear"))
+         (0.8, 1.58, "pear"))
 QUICK_CASES = ((0.85, 1.1, "prolate"),)
 KICK = 0.1
 #: a kicked run ends "the same" as its control when its e is within this (relative) and its
@@ -48,30 +53,51 @@ SAME = 1e-3
 MAX_STEPS = 6000
 
 
-def point_of(line: Path, da0: float) -> tuple[dict, object]:
-    """The branch point of a line folder nearest ``da0``: (its row, its φ)."""
-    from fem_ade.branch import load_points
+def point_of(line: Path, da0: float) -> tuple[dict, object, object]:
+    """The branch point of a line folder nearest ``da0``: (its row, its φ, its nodes); where
+    the points are not kept (a committed line: its ended.json), (its row, None, None)."""
+    import numpy as np
 
-    done = load_points(line)
-    if not done:
+    folders = sorted((line / "points").glob("[0-9][0-9][0-9][0-9]"))
+    rows = [(json.loads((f / "summary.json").read_text()), f) for f in folders
+            if (f / "summary.json").is_file()]
+    if not rows and (line / "ended.json").is_file():
+        kept = json.loads((line / "ended.json").read_text())["rows"]
+        return min(kept, key=lambda r: abs(r["da0"] - da0)), None, None
+    if not rows:
         raise FileNotFoundError(f"{line} holds no branch points (run ade_branches.py first)")
-    return min(done, key=lambda p: abs(p[0]["da0"] - da0))
+    row, folder = min(rows, key=lambda p: abs(p[0]["da0"] - da0))
+    with np.load(folder / "final.npz") as z:
+        return row, np.array(z["phi"]), np.array(z["points"])
 
 
-def revolved(line: Path, row: dict, phi):
-    """The 3D ``vesicle`` scene of a branch point, seeded with its φ = 0 meridian."""
+def revolved(line: Path, row: dict, phi, nodes, eps: float | None = None):
+    """The 3D ``vesicle`` scene of a branch point, seeded with its φ = 0 meridian (at the
+    line's ε, or at ``eps``: the same membrane with another interface width)."""
+    import numpy as np
+
     from fem_ade.axishape import meridians
     from fem_ade.backend import make_backend
     from fem_ade.branch import set_parameter
     from fem_ade.initial import Meridian
+    from fem_ade.model import ModelError
     from fem_ade.scenes import vesicle_scene
 
     info = json.loads((line / "branch.json").read_text())
     ended = json.loads((line / "ended.json").read_text())
-    scene = vesicle_scene(v=ended["v"], da0=row["da0"], kbar=1.4, eps=ended["eps"],
-                          branch=ended["branch"], R0=ended["R0"])
-    be = make_backend("fem", scene, n=info["n"], **info["options"], scheme="stabilized",
-                      constraints="exact")
+    for da0 in (info["from"], row["da0"]):  # the line's mesh: graded around its first seed
+        try:
+            scene = vesicle_scene(v=ended["v"], da0=da0, kbar=1.4, eps=ended["eps"],
+                                  branch=ended["branch"], R0=ended["R0"])
+        except ModelError:  # (a pear seeded by continuation: no sharp pear from scratch)
+            continue
+        be = make_backend("fem", scene, n=info["n"], **info["options"],
+                          scheme="stabilized", constraints="exact")
+        mine = be.fields()["points"]
+        if mine.shape == nodes.shape and np.allclose(mine, nodes, rtol=0, atol=1e-12):
+            break
+    else:
+        raise ValueError(f"{line}: cannot rebuild the mesh of its points")
     params = set_parameter(be.params, "da0", row["da0"])
     be.stepper.params = be.params = params
     be._set(phi, None)
@@ -83,7 +109,11 @@ def revolved(line: Path, row: dict, phi):
     ic = Meridian(centre=(0.5 * L,) * 3, r=tuple(float(x) / R0 for x in r),
                   z=tuple((float(x) - 0.5 * L) / R0 for x in z), scale=R0)
     ic.check(3)
-    return replace(scene, params=params, ic=ic), scene.n
+    n = scene.n
+    if eps is not None and eps != ended["eps"]:  # the same vesicle (v, Δa₀, R₀), another ε
+        params = set_parameter(params.with_(eps=eps, D=2.0 * eps / 3.0), "da0", row["da0"])
+        n = max(16, round(1.28 * L / eps))
+    return replace(scene, params=params, ic=ic), n
 
 
 def run_3d(scene, n: int, kick: float, out: Path) -> dict:
@@ -91,12 +121,18 @@ def run_3d(scene, n: int, kick: float, out: Path) -> dict:
     from fem_ade.sharp import reduced_energy
 
     if not (out / "summary.json").is_file():
-        options = {**recipe("steady", scene), "max_steps": MAX_STEPS}
-        simulate(scene, backend="spectral", n=n, perturb=kick, seed=1, render=False,
-                 quiet=True, out=out, force=out.is_dir(), **options)
+        options = {**recipe("steady", scene), "max_steps": MAX_STEPS, "checkpoint_every": 200}
+        if (out / "checkpoint.npz").is_file():  # a run stopped half-way goes on
+            from fem_ade.runs import resume
+
+            resume(out, quiet=True)
+        else:
+            simulate(scene, backend="spectral", n=n, perturb=kick, seed=1, render=False,
+                     quiet=True, out=out, force=out.is_dir(), **options)
     s = json.loads((out / "summary.json").read_text())
     shape = s.get("shape") or {}
     return {"status": s["status"], "steps": s["steps"], "cpu_s": round(s["cpu_s"], 1),
+            "eps": s["parameters"]["eps"],
             "e": reduced_energy(s["final"], s["parameters"]["kappa"]),
             "label": shape.get("label"), "arms": shape.get("arms"),
             "semi_axes": (shape.get("body") or {}).get("semi_axes")}
@@ -106,6 +142,12 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--quick", action="store_true", help="one case of ade_branches --quick")
+    ap.add_argument("--case", type=int, action="append",
+                    help="run only these cases (0-based indices of CASES; one process each "
+                         "case to run cases in parallel); the report is of the cases done")
+    ap.add_argument("--report-only", action="store_true", help="the cases already run")
+    ap.add_argument("--eps", type=float, default=None,
+                    help="the 3D runs' eps (default: the line's; 0.02 costs 1/16 of 0.01)")
     args = ap.parse_args(argv)
     suffix = "_quick" if args.quick else ""
     lines = args.out / f"ade_branches{suffix}"
@@ -116,21 +158,28 @@ def main(argv=None) -> dict:
         from ade_branches import main as ade_branches
 
         ade_branches(["--quick", "--out", str(args.out)])
-    base = args.out / f"nonaxisymmetric{suffix}"
+    base = args.out / f"nonaxisymmetric{suffix}" / ("" if args.eps is None else
+                                                     f"eps={args.eps:g}")
     rows = []
-    for v, da0, branch in (QUICK_CASES if args.quick else CASES):
+    cases = QUICK_CASES if args.quick else CASES
+    chosen = set(range(len(cases))) if args.case is None else set(args.case)
+    for i, (v, da0, branch) in enumerate(cases):
         line = lines / f"v={v:g}" / branch
         if not line.is_dir():  # the pear's lines: up and down from where it starts
             line = line.with_name(f"{branch}-up")
         t0 = time.perf_counter()
-        row, phi = point_of(line, da0)
-        scene, n = revolved(line, row, phi)
+        row, phi, nodes = point_of(line, da0)
         name = f"v={v:g}_da0={row['da0']:.4f}_{branch}"
+        done = all((base / name / k / "summary.json").is_file() for k in ("control", "kicked"))
+        if i not in chosen and not done or args.report_only and not done:
+            continue
+        scene, n = (None, None) if done else revolved(line, row, phi, nodes, args.eps)
         control = run_3d(scene, n, 0.0, base / name / "control")
         kicked = run_3d(scene, n, KICK, base / name / "kicked")
         same = (kicked["label"] == control["label"] and kicked["arms"] == control["arms"]
                 and abs(kicked["e"] / control["e"] - 1.0) < SAME)
-        rows.append({"v": v, "da0": row["da0"], "branch": branch, "e_axisymmetric": row["e"],
+        rows.append({"v": v, "da0": row["da0"], "branch": branch, "eps_3d": control["eps"],
+                     "e_axisymmetric": row["e"],
                      "unstable_axisymmetric": row["unstable"], "control": control,
                      "kicked": kicked, "same": same,
                      "verdict": ("stable to the kick" if same else
@@ -154,18 +203,19 @@ def write_report(path: Path, rows: list[dict]) -> None:
              "κ̄/κ = 1.4) and run to a steady state as it is (control) and with a smooth "
              f"random perturbation of amplitude {KICK} in φ (kicked: every angular mode). "
              f"Same: label and arms equal, e within {SAME:g}.", "",
-             "| v | Δa₀ | branch | e axisymmetric (unstable m = 0) | 3D control e (label, "
-             "steps) | 3D kicked e (label, steps) | verdict |", "|---|---|---|---|---|---|---|"]
+             "| v | Δa₀ | branch | e axisymmetric, its line's ε (unstable m = 0) | 3D ε | "
+             "3D control e (label, steps) | 3D kicked e (label, steps) | verdict |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         c, k = r["control"], r["kicked"]
         lines.append(f"| {r['v']:g} | {r['da0']:.4f} | {r['branch']} | "
                      f"{r['e_axisymmetric']:.5f} ({r['unstable_axisymmetric']}) | "
+                     f"{r['eps_3d']:g} | "
                      f"{c['e']:.5f} ({c['label']}, {c['steps']} {c['status']}) | "
                      f"{k['e']:.5f} ({k['label']}, {k['steps']} {k['status']}) | "
                      f"{r['verdict']} |")
     cpu = sum(r["control"]["cpu_s"] + r["kicked"]["cpu_s"] for r in rows)
-    lines += ["", f"3D runs: {cpu:.0f} s CPU in all ({math.fsum(r['seconds'] for r in rows):.0f}"
-              " s wall).", ""]
+    lines += ["", f"3D runs: {cpu:.0f} s CPU in all (FFTs on one worker each).", ""]
     notes = path.with_name(path.stem + "_notes.md")
     if notes.is_file():
         lines += [notes.read_text()]

@@ -34,7 +34,7 @@ STEPS = (
     ("ade_plane", ["studies/ade_plane.py", "--out", RESULTS]),
     ("branches", ["studies/branches.py", "--out", RESULTS]),
     ("ade_branches", ["studies/ade_branches.py", "--out", RESULTS]),
-    ("nonaxisymmetric", ["studies/nonaxisymmetric.py", "--out", RESULTS]),
+    ("nonaxisymmetric", ["studies/nonaxisymmetric.py", "--out", RESULTS, "--eps", "0.02"]),
     ("sweep_scaling", ["studies/sweep_scaling.py", "--out", RESULTS]),
     ("phase_diagram", ["studies/phase_diagram.py", "--out", RESULTS]),
 )
