@@ -575,6 +575,26 @@ def _curves(be):
         return []
 
 
+def vesicle_for_branch(chosen: dict, param: str, start: float, stop: float):
+    """The ``vesicle`` scene whose seed is the branch's first point (``param`` at ``start``)
+    and, without a given R₀, the R₀ with which the family's seed fits the box at both ends
+    of the branch: the smaller of the two defaults (a prolate followed from v = 0.95 at that
+    v's R₀ = 0.239 reached the box's ends near v = 0.72 and stopped there, ε = 0.01)."""
+    from .scenes import vesicle_scene
+
+    if "R0" not in chosen:
+        sizes = []
+        for value in (start, stop):
+            try:
+                s = vesicle_scene(**{**chosen, param: value})
+            except ModelError:  # no seed at that end (outside the family): the start decides
+                continue
+            sizes.append(math.sqrt(s.params.beta / (4.0 * math.pi)))
+        if sizes:
+            chosen = {**chosen, "R0": round(min(sizes), 6)}
+    return vesicle_scene(**{**chosen, param: start})
+
+
 def same_topology(first, label) -> bool:
     """Whether a point's shape has its branch's topology: one body of genus 0 (whatever its
     label: a prolate that grows a second waist, a pear whose label flips to gourd, an oblate
@@ -637,13 +657,12 @@ def main(argv=None) -> int:
     ap.error = error
     args = ap.parse_args(argv)
     try:
-        from .scenes import resolve_scene, vesicle_scene
+        from .scenes import resolve_scene
 
         chosen = {k: getattr(args, k) for k in ("v", "da0", "kbar", "C", "eps", "R0",
                                                  "branch") if getattr(args, k) is not None}
         if args.scene == "vesicle":
-            chosen[args.param] = args.start  # the seed: the branch's first point
-            scene = vesicle_scene(**chosen)
+            scene = vesicle_for_branch(chosen, args.param, args.start, args.stop)
         elif chosen:
             raise ModelError("--v, --da0, ... describe the vesicle scene; give them with "
                              "the scene vesicle")

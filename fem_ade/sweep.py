@@ -104,6 +104,12 @@ class Point:
         from .scenes import resolve_scene, vesicle_scene
 
         start = {self.branch["param"]: self.branch["from"]} if self.branch else {}
+        if self.base == "vesicle" and self.branch:  # R₀ to fit both ends of the branch
+            from .branch import vesicle_for_branch
+
+            return vesicle_for_branch({**self.fixed, **self.values, "branch": self.seed},
+                                      self.branch["param"], self.branch["from"],
+                                      self.branch["to"])
         if self.base == "vesicle":
             return vesicle_scene(**self.fixed, **self.values, **start, branch=self.seed)
         scene = resolve_scene(self.base).with_(**self.fixed, **self.values)

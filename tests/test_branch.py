@@ -12,8 +12,8 @@ from fem_ade.branch import get_parameter, main, set_parameter
 from fem_ade.fem.newton import solve_steady
 from fem_ade.scenes import vesicle_scene
 
-ARGS = ["vesicle", "--branch", "prolate", "--eps", "0.05", "--param", "v", "--from", "0.95",
-        "--to", "0.91", "--step", "0.02", "--quiet"]
+ARGS = ["vesicle", "--branch", "prolate", "--eps", "0.05", "--R0", "0.2", "--param", "v",
+        "--from", "0.95", "--to", "0.91", "--step", "0.02", "--quiet"]
 
 
 def rows(folder):
@@ -43,7 +43,7 @@ def test_a_branch_of_steady_states(branch):
 
 def test_each_point_is_a_steady_state(branch):
     """Newton from a saved point, at its parameter, does not move it: E to 1e-10."""
-    scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05)
+    scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05, R0=0.2)
     n = json.loads((branch / "branch.json").read_text())["n"]
     be = make_backend("fem", scene, n=n, geometry="axisymmetric", scheme="stabilized",
                       constraints="exact")
@@ -155,7 +155,7 @@ def test_stability_equals_a_dense_eigensolve(branch):
     from fem_ade.branch import stability
     from fem_ade.fem.newton import NewtonSystem, linearize
 
-    scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05)
+    scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05, R0=0.2)
     n = json.loads((branch / "branch.json").read_text())["n"]
     be = make_backend("fem", scene, n=n, geometry="axisymmetric", scheme="stabilized",
                       constraints="exact")
@@ -192,3 +192,23 @@ def test_a_branch_ends_at_a_change_of_topology_not_of_label():
     for a, b in (("oblate", "torus"), ("pear", "2 vesicles"), ("stomatocyte", "nested"),
                  ("2 vesicles", "gourd")):
         assert not same_topology(a, b), (a, b)
+
+
+def test_a_vesicle_branch_fits_the_box_at_both_ends():
+    """Without --R0 a vesicle branch takes the family's R₀ of the end where the seed is the
+    longest (a prolate followed from v = 0.95 at that v's R₀ ran into the box's ends near
+    v = 0.72 at ε = 0.01); a given R₀ is kept."""
+    import math
+
+    from fem_ade.branch import vesicle_for_branch
+
+    def R0(scene):
+        return math.sqrt(scene.params.beta / (4.0 * math.pi))
+
+    both = vesicle_for_branch({"branch": "prolate", "eps": 0.05}, "v", 0.95, 0.7)
+    at_end = vesicle_scene(v=0.7, branch="prolate", eps=0.05)
+    assert R0(both) == pytest.approx(R0(at_end), abs=1e-6)
+    assert R0(both) < R0(vesicle_scene(v=0.95, branch="prolate", eps=0.05)) - 0.01
+    assert get_parameter(both.params, "v") == pytest.approx(0.95)
+    given = vesicle_for_branch({"branch": "prolate", "eps": 0.05, "R0": 0.2}, "v", 0.95, 0.7)
+    assert R0(given) == pytest.approx(0.2)
