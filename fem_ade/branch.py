@@ -595,30 +595,33 @@ def vesicle_for_branch(chosen: dict, param: str, start: float, stop: float):
     return vesicle_scene(**{**chosen, param: start})
 
 
+def branch_of_label(label):
+    """The sharp branch a point's shape label stands for (:data:`fem_ade.sharp.BRANCH_OF_LABEL`,
+    where a prolate whose waists multiply, gourd → chain, is still the prolate: one body of
+    genus 0, two necks, seen at eps/R0 = 0.06-0.12 from v = 0.67 down), or None."""
+    from .sharp import BRANCH_OF_LABEL
+
+    return {**BRANCH_OF_LABEL, "chain": "prolate"}.get(label)
+
+
 def same_topology(first, label) -> bool:
     """Whether a point's shape has its branch's topology: one body of genus 0 (whatever its
     label: a prolate that grows a second waist, a pear whose label flips to gourd, an oblate
     whose dimples deepen into a stomatocyte are each still one branch), a torus, or the same
     label otherwise (two vesicles, nested)."""
-    from .sharp import BRANCH_OF_LABEL
-
     def kind(text):
         if text == "torus":
             return "torus"
-        genus0 = BRANCH_OF_LABEL.get(text) in ("prolate", "oblate", "stomatocyte", "pear")
-        return "one body of genus 0" if genus0 or text in ("chain", "sphere") else text
+        genus0 = branch_of_label(text) in ("prolate", "oblate", "stomatocyte", "pear")
+        return "one body of genus 0" if genus0 or text == "sphere" else text
 
     return kind(first) == kind(label)
 
 
 def same_branch(first, label) -> bool:
-    """Whether a point's label is its branch's: the same sharp branch, where a prolate whose
-    waists multiply (gourd → chain: one body of genus 0, two necks) is no topology change
-    (seen at eps/R0 = 0.06-0.12 from v = 0.67 down)."""
-    from .sharp import BRANCH_OF_LABEL
-
-    family = {**BRANCH_OF_LABEL, "chain": "prolate"}
-    return family.get(first, first) == family.get(label, label)
+    """Whether a point's label is its branch's: the same sharp branch
+    (:func:`branch_of_label`; a label of no branch only equals itself)."""
+    return (branch_of_label(first) or first) == (branch_of_label(label) or label)
 
 
 def _line(param, row) -> str:

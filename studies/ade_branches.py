@@ -229,9 +229,9 @@ def on_branch(row: dict, branch: str, sharp: dict) -> bool:
     must be labelled as ``branch`` or its pair's other branch (:data:`PAIRED`), and where both
     have a sharp shape near this Δa₀ its surface's da must be nearer ``branch``'s, else
     (only ``branch``'s) within DA_TOL or labelled ``branch``."""
-    from fem_ade.sharp import BRANCH_OF_LABEL
+    from fem_ade.branch import branch_of_label
 
-    family = BRANCH_OF_LABEL.get(row["label"], "prolate" if row["label"] == "chain" else None)
+    family = branch_of_label(row["label"])
     if branch == "torus" or family == "torus":
         return branch == family == "torus"
     if family not in (branch, PAIRED[branch]):
