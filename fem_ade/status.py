@@ -23,8 +23,14 @@ class Status(str, Enum):
     DIVERGED = "diverged"
     #: stopped by a signal; its checkpoint resumes it
     INTERRUPTED = "interrupted"
-    #: (a sweep's point) it could not run: an error, with its reason
+    #: (a job) it could not run: an error, with its reason (``NAME.failed.json``)
     FAILED = "failed"
+    #: (a job) its folder is held by another live process
+    BUSY = "busy"
+    #: (a sweep's point) nothing has run yet
+    PENDING = "pending"
+    #: (a sweep's point) its summary.json cannot be read as a run's
+    DAMAGED = "damaged"
 
     __str__ = str.__str__
     __format__ = str.__format__

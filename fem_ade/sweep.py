@@ -67,6 +67,7 @@ import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from .jobs import failure_record
 from .model import ModelError
 from .status import ENDED, Status
 
@@ -363,35 +364,27 @@ def check_sweep(sweep: Sweep) -> None:
 # one point, on a worker
 # ---------------------------------------------------------------------------------------
 def run_point(point: Point, root: str) -> dict:
-    """Run (or resume, or skip) one point in ``root/points/NAME``; its table row. A folder
-    held by another process gives status ``busy`` (the driver tries again later)."""
-    from .lock import FolderBusy
-    from .runs import resume, simulate
+    """Run (or resume, or skip) one point in ``root/points/NAME`` through
+    :func:`fem_ade.jobs.ensure`; its table row. A folder held by another process gives
+    status ``busy`` (the driver tries again later)."""
+    from .jobs import ensure
 
     folder = Path(root) / "points" / point.name
-    failed = folder.with_name(point.name + ".failed.json")
-    t0 = time.perf_counter()
     _write_json(folder.with_name(point.name + ".point.json"), point.identity())
-    if _status(folder) not in ENDED:
-        failed.unlink(missing_ok=True)  # a failure of before is tried again
-        try:
-            if point.branch:
-                _follow(point, folder)
-            elif (folder / "checkpoint.npz").is_file() and (folder / "run.json").is_file():
-                resume(folder, quiet=True)
-            else:
-                scene = point.scene()
-                _write_json(folder.with_name(point.name + ".seed.json"),
-                            {"point": point.name, "seed": scene.description,
-                             "e_sharp": _seed_sharp_e(point)})
-                simulate(scene, out=folder, force=folder.is_dir(), quiet=True,
-                         **point.options(scene))
-        except FolderBusy as err:
-            return {"point": point.name, "status": "busy", "reason": str(err)}
-        except (ModelError, ValueError, FloatingPointError) as err:
-            _write_json(failed, {"point": point.name, "reason": f"{type(err).__name__}: {err}",
-                                 "seconds": round(time.perf_counter() - t0, 2)})
-    return {**row(point, Path(root)), "task_s": time.perf_counter() - t0}
+    if point.branch:
+        done = ensure(folder, make=lambda f: _follow(point, f))
+    else:
+        def scene():  # made only when the run starts: its errors are the point's failure
+            made = point.scene()
+            _write_json(folder.with_name(point.name + ".seed.json"),
+                        {"point": point.name, "seed": made.description,
+                         "e_sharp": _seed_sharp_e(point)})
+            return made
+
+        done = ensure(folder, scene, options=point.options)
+    if done.status == Status.BUSY:
+        return {"point": point.name, "status": Status.BUSY, "reason": done.reason}
+    return {**row(point, Path(root)), "task_s": done.seconds}
 
 
 def _follow(point: Point, folder: Path) -> None:
@@ -416,7 +409,7 @@ def changed(point: Point, root: Path) -> str | None:
     when nothing was run yet)."""
     folder = root / "points" / point.name
     record = folder.with_name(point.name + ".point.json")
-    made = [p for p in (folder, folder.with_name(point.name + ".failed.json"),
+    made = [p for p in (folder, failure_record(folder),
                         folder.with_name(point.name + ".seed.json")) if p.exists()]
     if not made:
         return None
@@ -438,7 +431,8 @@ def forget(point: Point, root: Path) -> None:
     folder = root / "points" / point.name
     if folder.is_dir():
         shutil.rmtree(folder)
-    for suffix in (".failed.json", ".seed.json", ".point.json"):
+    failure_record(folder).unlink(missing_ok=True)
+    for suffix in (".seed.json", ".point.json"):
         folder.with_name(point.name + suffix).unlink(missing_ok=True)
 
 
@@ -511,13 +505,6 @@ def check_points(sweep: Sweep, root: Path, rerun_changed: bool) -> None:
         forget(point, root)
 
 
-def _status(folder: Path) -> str | None:
-    try:
-        return json.loads((folder / "summary.json").read_text())["status"]
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-
-
 def _write_json(path: Path, data) -> None:
     from .output import write_json_atomic
 
@@ -530,16 +517,16 @@ def row(point: Point, root: Path) -> dict:
 
     folder = root / "points" / point.name
     out = {"point": point.name, **point.values, "seed": point.seed}
-    failed = folder.with_name(point.name + ".failed.json")
+    failed = failure_record(folder)
     if failed.is_file():
         rec = json.loads(failed.read_text())
         return {**out, "status": Status.FAILED, "reason": rec["reason"]}
     try:
         s = json.loads((folder / "summary.json").read_text())
     except (OSError, ValueError):
-        return {**out, "status": "pending"}
+        return {**out, "status": Status.PENDING}
     if not isinstance(s, dict):
-        return {**out, "status": "damaged", "reason": "its summary.json is not a table"}
+        return {**out, "status": Status.DAMAGED, "reason": "its summary.json is not a table"}
     try:
         seed = json.loads(folder.with_name(point.name + ".seed.json").read_text())
     except (OSError, ValueError):
@@ -551,7 +538,7 @@ def row(point: Point, root: Path) -> dict:
             return _row_of_branch(out, s)
         return _row_of_summary(out, s, seed)
     except (KeyError, TypeError, ValueError, AttributeError) as err:
-        return {**out, "status": "damaged",
+        return {**out, "status": Status.DAMAGED,
                 "reason": f"its summary.json is damaged ({type(err).__name__}: {err})"}
 
 
@@ -706,10 +693,10 @@ def _drive(client, todo, out, rows, axes, quiet, retry_s, as_completed):
                 r = fut.result()
             except Exception as err:  # noqa: BLE001 - a worker lost, an unexpected error
                 name = fut.key.removeprefix("point-")
-                _write_json(out / "points" / f"{name}.failed.json",
+                _write_json(failure_record(out / "points" / name),
                             {"point": name, "reason": f"{type(err).__name__}: {err}"})
                 r = row(by_name[name], out)
-            if r["status"] == "busy":  # another process runs it: ask again later
+            if r["status"] == Status.BUSY:  # another process runs it: ask again later
                 time.sleep(retry_s)
                 futures.add(client.submit(run_point, by_name[r["point"]], str(out),
                                           pure=False))

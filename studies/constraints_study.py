@@ -295,8 +295,12 @@ def run_case(
     quiet: bool,
     subdir: str = "constraints",
 ) -> dict:
-    from fem_ade.runs import simulate
+    from fem_ade.jobs import ensure, status_of
+    from fem_ade.status import ENDED
 
+    out = out_root / subdir / f"{name}-{variant}"
+    if (out / "case.json").is_file() and status_of(out) in ENDED:  # finished: not run again
+        return json.loads((out / "case.json").read_text())
     n, extra = SCENES[name]
     if quick:
         n = 16
@@ -313,7 +317,6 @@ def run_case(
         "tol": tol,
         "dt_passed": True,
     }
-    out = out_root / subdir / f"{name}-{variant}"
     if not math.isfinite(dt):
         dt = fallback_dt(log)
         case["dt_passed"] = False
@@ -335,15 +338,10 @@ def run_case(
             f"{ms:.2f} ms/step in trial, {run_kw}",
             flush=True,
         )
-    r = simulate(
-        scene,
-        dt=dt,
-        every=10 if quick else every,
-        out=out,
-        force=True,
-        **run_kw,
-        **common_kwargs(name, variant, n, extra, allow),
-    )
+    done = ensure(out, scene, options=dict(dt=dt, every=10 if quick else every, **run_kw,
+                                           **common_kwargs(name, variant, n, extra, allow)),
+                  restart=True).check()
+    r, history = done.summary, run_history(out)
     p = scene.params
     bulk = None
     if (out / "final.npz").is_file():
@@ -359,24 +357,24 @@ def run_case(
         dt=dt,
         dt_factor=dt / scene.dt,
         paper_dt=scene.dt,
-        status=r.status,
-        steps=r.steps,
-        t=r.t,
-        message=r.message,
-        wall_s=r.wall_s,
+        status=r["status"],
+        steps=r["steps"],
+        t=r["t"],
+        message=r["message"],
+        wall_s=r["wall_s"],
         max_steps=run_kw.get("max_steps"),
-        final=r.final,
-        shape=r.shape,
+        final=r["final"],
+        shape=r["shape"],
         alpha=p.alpha,
         beta=p.beta,
         delta_A0=p.delta_A0,
         M1=p.M1,
         M2=p.M2,
-        rises=energy_rises(r.history),
-        records=len(r.history),
-        E0=float(r.history[0]["E"]),
-        E_end=float(r.history[-1]["E"]),
-        last_rate=_last_rate(r.history),
+        rises=energy_rises(history),
+        records=len(history),
+        E0=float(history[0]["E"]),
+        E_end=float(history[-1]["E"]),
+        last_rate=_last_rate(history),
         bulk=bulk,
     )
     (out / "case.json").write_text(json.dumps(case, indent=1, default=str))
@@ -408,8 +406,10 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
     """
     import numpy as np
 
+    from fem_ade.jobs import ensure, status_of
     from fem_ade.runs import simulate
     from fem_ade.shape import describe
+    from fem_ade.status import ENDED
 
     src = out_root / "constraints" / "long" / "discocyte-exact" / "final.npz"
     with np.load(src) as z:
@@ -423,6 +423,10 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
             if label in old:
                 report["runs"][label] = old[label]
             continue
+        out = out_root / "constraints" / "check" / label
+        if label in old and status_of(out) in ENDED:  # finished before: its row is kept
+            report["runs"][label] = old[label]
+            continue
         scene = scene_for("discocyte", variant)
         cons = "exact" if variant == "exact" else "penalty"
         dt = factor * scene.dt
@@ -430,9 +434,10 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
                   phi0=phi0, quiet=True)
         probe = simulate(scene, steps=20, every=20, **kw)  # the step cost sets the length
         steps = max(int(budget / (1.3 * probe.wall_s / 20)) // 500 * 500, 500)
-        out = out_root / "constraints" / "check" / label
-        r = simulate(scene, steps=steps, every=500, out=out, force=True, **kw)
-        d0 = r.history[0]
+        r = ensure(out, scene, options=dict(kw, steps=steps, every=500),
+                   restart=True).check().summary
+        history = run_history(out)
+        d0 = history[0]
         with np.load(out / "final.npz") as z:
             phi1 = np.array(z["phi"])
         sh0 = describe(phi0, scene.params.L)
@@ -443,9 +448,9 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
         keys = ("components", "genus", "reduced_volume", "reduced_area_difference")
         report["runs"][label] = {
             "dt": dt,
-            "steps": r.steps,
-            "status": r.status,
-            "wall_s": r.wall_s,
+            "steps": r["steps"],
+            "status": r["status"],
+            "wall_s": r["wall_s"],
             "start": {
                 **{k: d0[k] for k in ("E", "W", "G", "V", "A", "dA")},
                 **{k: sh0[k] for k in keys},
@@ -453,13 +458,13 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
                 "bulk": bulk0,
             },
             "end": {
-                **{k: r.final[k] for k in ("E", "W", "G", "V", "A", "dA")},
+                **{k: r["final"][k] for k in ("E", "W", "G", "V", "A", "dA")},
                 **{k: sh1[k] for k in keys},
                 "sharp": sh1["sharp"],
                 "bulk": bulk1,
             },
-            "history": [{k: h[k] for k in ("step", "E", "W", "G", "V", "A")} for h in r.history],
-            "rises": energy_rises(r.history),
+            "history": [{k: h[k] for k in ("step", "E", "W", "G", "V", "A")} for h in history],
+            "rises": energy_rises(history),
         }
         from fem_ade.output import series_files
 
@@ -549,6 +554,14 @@ def clean(root: Path) -> list[Path]:
             fp.unlink()
             gone.append(fp)
     return gone
+
+
+def run_history(folder: Path) -> list[dict]:
+    """A run folder's history.csv as one dict per record."""
+    from fem_ade.output import read_history
+
+    h = read_history(folder / "history.csv")
+    return [dict(zip(h, values, strict=True)) for values in zip(*h.values(), strict=True)]
 
 
 def _last_rate(history: list[dict]) -> float:

@@ -58,8 +58,9 @@ from pathlib import Path
 
 import numpy as np
 
+from fem_ade.jobs import status_of
 from fem_ade.render import compact_png, save_figure
-from fem_ade.status import ENDED, Status
+from fem_ade.status import Status
 
 #: the committed gallery (its verdicts also go to fem_ade/verdicts.json when it is --out)
 RESULTS = Path(__file__).resolve().parent / "results" / "gallery"
@@ -150,32 +151,13 @@ def case_dir(root: Path, case: dict) -> Path:
 
 
 
-def _status(folder: Path) -> str | None:
-    """The status in a run folder's summary.json (None before it has one)."""
-    try:
-        return json.loads((folder / "summary.json").read_text())["status"]
-    except (OSError, ValueError, KeyError):
-        return None
+def _run(scene, folder: Path, kwargs: dict, quiet: bool, after: Path | None = None):
+    """The run in ``folder`` made to exist (:func:`fem_ade.jobs.ensure`: skipped if it
+    finished, resumed, started again if its checkpoint is not resumable); a failure raises."""
+    from fem_ade.jobs import ensure
 
-
-def _finished(folder: Path) -> bool:
-    return _status(folder) in ENDED
-
-
-def _run(scene, folder: Path, kwargs: dict, quiet: bool):
-    """simulate() into ``folder``, or resume it, or skip it if it finished."""
-    from fem_ade.runs import resume, simulate
-
-    if _finished(folder):
-        return None
-    if (folder / "checkpoint.npz").is_file() and (folder / "run.json").is_file():
-        from fem_ade.model import ModelError
-
-        try:
-            return resume(folder, quiet=quiet)
-        except ModelError as err:  # e.g. a checkpoint of an older version: start again
-            print(f"  {folder}: not resumable ({err}); starting again", flush=True)
-    return simulate(scene, out=folder, force=True, quiet=quiet, render=True, **kwargs)
+    return ensure(folder, scene, options=dict(kwargs, render=True), after=after, quiet=quiet,
+                  restart=True).check()
 
 
 def far_field(phi: np.ndarray, L: float, eps: float, far: float = 6.0) -> float:
@@ -252,7 +234,7 @@ def slim(folder: Path) -> None:
 def _stop_if_interrupted(folder: Path) -> None:
     """A run stopped by a signal (Ctrl-C) keeps its checkpoint for the next sitting: it is
     not analysed or slimmed, and the gallery stops."""
-    if _status(folder) == Status.INTERRUPTED:
+    if status_of(folder) == Status.INTERRUPTED:
         print(f"  {folder}: interrupted; `studies/gallery.py` resumes it", flush=True)
         raise KeyboardInterrupt
 
@@ -276,9 +258,8 @@ def run_case(root: Path, case: dict, *, quiet: bool, keep: bool) -> dict:
     result = analyse(folder, scene)
     if case["variant"] != "a" and result["status"] == Status.STEADY:
         kick = folder / "kick"
-        kw = dict(case["kwargs"], perturb=KICK[0], seed=KICK[1], phi0=str(folder),
-                  ic="consistent")
-        _run(scene, kick, kw, quiet)
+        kw = dict(case["kwargs"], perturb=KICK[0], seed=KICK[1], ic="consistent")
+        _run(scene, kick, kw, quiet, after=folder)
         _stop_if_interrupted(kick)
         analyse(kick, scene)
         if not keep:

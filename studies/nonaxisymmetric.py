@@ -117,19 +117,13 @@ def revolved(line: Path, row: dict, phi, nodes, eps: float | None = None):
 
 
 def run_3d(scene, n: int, kick: float, out: Path) -> dict:
-    from fem_ade.runs import recipe, simulate
+    from fem_ade.jobs import ensure
+    from fem_ade.runs import recipe
     from fem_ade.sharp import reduced_energy
 
-    if not (out / "summary.json").is_file():
-        options = {**recipe("steady", scene), "max_steps": MAX_STEPS, "checkpoint_every": 200}
-        if (out / "checkpoint.npz").is_file():  # a run stopped half-way goes on
-            from fem_ade.runs import resume
-
-            resume(out, quiet=True)
-        else:
-            simulate(scene, backend="spectral", n=n, perturb=kick, seed=1, render=False,
-                     quiet=True, out=out, force=out.is_dir(), **options)
-    s = json.loads((out / "summary.json").read_text())
+    options = {**recipe("steady", scene), "max_steps": MAX_STEPS, "checkpoint_every": 200,
+               "backend": "spectral", "n": n, "perturb": kick, "seed": 1, "render": False}
+    s = ensure(out, scene, options=options).check().summary
     shape = s.get("shape") or {}
     return {"status": s["status"], "steps": s["steps"], "cpu_s": round(s["cpu_s"], 1),
             "eps": s["parameters"]["eps"],

@@ -185,6 +185,8 @@ LABELS = {"sphere": GENUS0, "torus": ("torus",),
           # the axisymmetric descriptors tell the stomatocyte (one pole invaginated) apart
           "stomatocyte": GENUS0 + ("stomatocyte",)}
 DA_TOL = 0.12
+#: a phase-field run writes a checkpoint every this many steps (a killed one resumes there)
+CHECKPOINT_EVERY = 500
 MARGIN = 4.75 * max(EPS)
 #: the finest two only for the cases given with --fine (the cost grows like ε⁻⁴): by default
 #: those that keep their branch at ε = 0.016; ``FINE_STOP``: where a case stops (the sphere's
@@ -280,14 +282,17 @@ def radius(sharp: dict) -> float:
     return min(0.25, (1.0 - 2.0 * MARGIN) / extent)
 
 
-def phase_field(sharp: dict, branch: str, eps: float, backend: str, *, kbar: float = 0.0,
-                m0: float = 0.0) -> dict:
-    """One seeded steady state: its energy, shape and cost; with ``kbar`` (κ̄/κ), area-
-    difference elasticity toward the reduced ``m0`` (ΔA₀ = 8πDR₀·m₀, R₀ the seed's in the
-    box) — e is then (W + G) over a sharp sphere's bending energy."""
+def phase_field(sharp: dict, branch: str, eps: float, backend: str, folder: Path, *,
+                kbar: float = 0.0, m0: float = 0.0) -> dict:
+    """One seeded steady state, run in ``folder`` (:func:`fem_ade.jobs.ensure`: a killed
+    run resumes from its checkpoint, a finished one is read): its energy, shape and cost;
+    with ``kbar`` (κ̄/κ), area-difference elasticity toward the reduced ``m0``
+    (ΔA₀ = 8πDR₀·m₀, R₀ the seed's in the box) — e is then (W + G) over a sharp sphere's
+    bending energy."""
     from fem_ade.initial import Meridian
+    from fem_ade.jobs import ensure
     from fem_ade.model import Params
-    from fem_ade.runs import recipe, simulate
+    from fem_ade.runs import recipe
     from fem_ade.scenes import Scene
 
     R0, v = radius(sharp), sharp["v"]
@@ -308,25 +313,33 @@ def phase_field(sharp: dict, branch: str, eps: float, backend: str, *, kbar: flo
     else:
         options = {"backend": "spectral", "n": n} if backend == "spectral" else {
             "backend": "fem", "n": n // 4, "backend_options": {"order": 4}}
-    t0 = time.perf_counter()
-    res = simulate(scene, **recipe("steady", scene), **options, every=50, render=False)
-    seconds = time.perf_counter() - t0
-    d = res.shape  # the run's own descriptors of its final φ = 0 surface (sharp values)
+    done = ensure(folder, scene, options=dict(recipe("steady", scene), **options, every=50,
+                                              render=False, checkpoint_every=CHECKPOINT_EVERY),
+                  restart=True).check()
+    res = done.summary
+    d = res["shape"]  # the run's own descriptors of its final φ = 0 surface (sharp values)
+    final = res["final"]
     row = {"branch": branch, "v": v, "eps": eps, "n": n, "R0": R0, "backend": backend,
-           "status": res.status, "steps": res.steps, "cpu_s": round(res.cpu_s
-                                                                  + res.setup_cpu_s, 2),
-           "e": reduced_energy(res.final),  # G is 0 with ADE off
-           "w": res.final["W"] / SPHERE_W,
+           "status": res["status"], "steps": res["steps"],
+           "cpu_s": round(res["cpu_s"] + (res["setup_cpu_s"] or 0.0), 2),
+           "e": reduced_energy(final),  # G is 0 with ADE off
+           "w": final["W"] / SPHERE_W,
            # the area difference the model's ADE term sees (the diffuse ΔA), reduced
-           "da_diffuse": res.final["dA"] / (8.0 * math.pi * params.D * R0) if kbar else None,
-           "G": res.final["G"], "W": res.final["W"],
+           "da_diffuse": final["dA"] / (8.0 * math.pi * params.D * R0) if kbar else None,
+           "G": final["G"], "W": final["W"],
            "label": d["label"], "components": d["components"], "genus": d["genus"],
            "da": d["reduced_area_difference"], "v_surface": d["reduced_volume"],
-           "seconds": round(seconds, 1)}
+           "seconds": round(done.seconds, 1)}
     row["kept_branch"] = kept(row, sharp)
-    grid = np.asarray(res.final_grid)
+    with np.load(folder / "final.npz") as z:
+        grid = np.array(z["phi_grid"] if "phi_grid" in z.files else z["phi"])
     row["section"] = grid[:, grid.shape[1] // 2, :].astype(np.float32)  # y = ½, the picture's
     return row
+
+
+def run_folder(out: Path, key: str) -> Path:
+    """The run folder of a cached row (``OUT/sharp/runs/KEY``; not committed: the row is)."""
+    return out / "sharp" / "runs" / key.replace("/", "_")
 
 
 def kept(run: dict, sharp: dict) -> bool:
@@ -652,7 +665,7 @@ def run_eps(cache: Cache, out: Path, backend: str, plan, only=None, fine=()) -> 
             if key in runs or (not axi and eps in FINE and _key(branch, v) not in fine) or (
                     eps < stop):
                 continue
-            row = phase_field(sharp, branch, eps, backend)
+            row = phase_field(sharp, branch, eps, backend, run_folder(out, key))
             print(f"  {key}: e = {row['e']:.6f} (sharp {sharp['w']:.6f}), {row['label']}"
                   f"{'' if row['kept_branch'] else ' LEFT the branch'}, {row['steps']} steps, "
                   f"{row['seconds']} s", flush=True)
@@ -680,7 +693,8 @@ def run_ade(cache: Cache, out: Path, plan) -> None:
             key = _ade_key(branch, v, m0, eps)
             if key in runs:
                 continue
-            row = phase_field(sharp, branch, eps, "axisymmetric", kbar=ADE_KBAR, m0=m0)
+            row = phase_field(sharp, branch, eps, "axisymmetric", run_folder(out, key),
+                              kbar=ADE_KBAR, m0=m0)
             row.pop("section")
             row["m0"] = m0
             print(f"  {key}: e = {row['e']:.6f} (sharp {sharp['e']:.6f}), da diffuse "
@@ -770,7 +784,7 @@ def run_transitions(cache: Cache, out: Path, plan) -> None:
     def one(key, sharp, branch, eps, **ade):
         if key in runs or sharp is None or "w" not in sharp:
             return
-        row = phase_field(sharp, branch, eps, "axisymmetric", **ade)
+        row = phase_field(sharp, branch, eps, "axisymmetric", run_folder(out, key), **ade)
         row.pop("section")
         row.update({k: v for k, v in ade.items() if k == "m0"})
         print(f"  {key}: e = {row['e']:.6f}, {row['label']}"
