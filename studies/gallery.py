@@ -459,10 +459,12 @@ def _load(root: Path, variant: str, backend: str, name: str,
 
 
 def _picture(root: Path, variant: str, backend: str, name: str, a: dict) -> Path:
-    """The run's picture: its shape.png, else its thumbnail."""
-    if a.get("folder") and (Path(a["folder"]) / "shape.png").is_file():
-        return Path(a["folder"]) / "shape.png"
-    return _thumb(root, variant, backend, name)
+    """The run's committed thumbnail, else (a run not archived yet) its shape.png: the
+    montage is then the same from a fresh clone as from the folder that ran the gallery."""
+    thumb = _thumb(root, variant, backend, name)
+    if thumb.is_file() or not a.get("folder"):
+        return thumb
+    return Path(a["folder"]) / "shape.png"
 
 
 def interrupted(root: Path, variant: str, backend: str, name: str) -> str | None:

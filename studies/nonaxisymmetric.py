@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -121,9 +120,11 @@ def run_3d(scene, n: int, kick: float, out: Path) -> dict:
     from fem_ade.runs import recipe
     from fem_ade.sharp import reduced_energy
 
-    options = {**recipe("steady", scene), "max_steps": MAX_STEPS, "checkpoint_every": 200,
-               "backend": "spectral", "n": n, "perturb": kick, "seed": 1, "render": False}
-    s = ensure(out, scene, options=options).check().summary
+    def options(scene):  # made only when the run starts (a finished one has no scene here)
+        return {**recipe("steady", scene), "max_steps": MAX_STEPS, "checkpoint_every": 200,
+                "backend": "spectral", "n": n, "perturb": kick, "seed": 1, "render": False}
+
+    s = ensure(out, lambda: scene, options=options).check().summary
     shape = s.get("shape") or {}
     return {"status": s["status"], "steps": s["steps"], "cpu_s": round(s["cpu_s"], 1),
             "eps": s["parameters"]["eps"],
@@ -161,7 +162,6 @@ def main(argv=None) -> dict:
         line = lines / f"v={v:g}" / branch
         if not line.is_dir():  # the pear's lines: up and down from where it starts
             line = line.with_name(f"{branch}-up")
-        t0 = time.perf_counter()
         row, phi, nodes = point_of(line, da0)
         name = f"v={v:g}_da0={row['da0']:.4f}_{branch}"
         done = all((base / name / k / "summary.json").is_file() for k in ("control", "kicked"))
@@ -178,8 +178,7 @@ def main(argv=None) -> dict:
                      "kicked": kicked, "same": same,
                      "verdict": ("stable to the kick" if same else
                                  "left the axisymmetric state"
-                                 + (" (lower)" if kicked["e"] < control["e"] else "")),
-                     "seconds": round(time.perf_counter() - t0, 1)})
+                                 + (" (lower)" if kicked["e"] < control["e"] else ""))})
         print(f"{name}: axisymmetric e = {row['e']:.5f}; 3D control {control['e']:.5f} "
               f"({control['label']}), kicked {kicked['e']:.5f} ({kicked['label']}): "
               f"{rows[-1]['verdict']}", flush=True)
