@@ -228,9 +228,12 @@ def _jsonable(obj):
 
 
 def write_json_atomic(path: str | Path, data: dict, indent: int | None = 2) -> None:
+    """``data`` as JSON in ``path``, whole or not at all (written, then renamed);
+    ``indent=None``: on one line without spaces (the studies' large caches)."""
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(_jsonable(data), indent=indent) + "\n")
+    separators = (",", ":") if indent is None else None
+    tmp.write_text(json.dumps(_jsonable(data), indent=indent, separators=separators) + "\n")
     os.replace(tmp, path)
 
 

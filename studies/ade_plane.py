@@ -150,7 +150,7 @@ def sharp_stage(out: Path, planes, say=print) -> dict:
                 cache[_key(b, v)] = {"grid": list(plane.m0), "anchor": plane.anchor[b],
                                      "rows": rows}
                 path.parent.mkdir(parents=True, exist_ok=True)
-                write_json_atomic(path, cache, indent=0)
+                write_json_atomic(path, cache, indent=None)
     return cache
 
 
@@ -190,7 +190,7 @@ def pf_stage(out: Path, planes, cache: dict, eps: float, say=print) -> dict:
                 row["m0"] = m0
                 runs[key] = row
                 path.parent.mkdir(parents=True, exist_ok=True)
-                write_json_atomic(path, runs, indent=0)
+                write_json_atomic(path, runs, indent=None)
     return runs
 
 

@@ -136,7 +136,7 @@ def main(argv=None) -> dict:
     result = {"runs": runs, "summary": summarize(runs), "steady": steady_table(steady),
               "run_s": time.perf_counter() - t0, "machine": data.get("machine")}
     suffix = "_quick" if args.quick else ""
-    (out / f"cost{suffix}.json").write_text(json.dumps(result, indent=1) + "\n")
+    (out / f"cost{suffix}.json").write_text(json.dumps(result, separators=(",", ":")) + "\n")
     report(result, out, suffix)
     return result
 

@@ -437,7 +437,8 @@ def archive(root: Path) -> dict:
                                            Image.Resampling.LANCZOS)
                     cell.quantize(32).save(thumb, optimize=True)
     if changed:
-        path.write_text(json.dumps(entries, indent=0, sort_keys=True, default=str) + "\n")
+        path.write_text(json.dumps(entries, separators=(",", ":"), sort_keys=True, default=str)
+                        + "\n")
     return entries
 
 
@@ -713,7 +714,7 @@ def montage(root: Path, data, names, backend, variants) -> Path | None:
     names = [n for n in names if any((n, v) in cells for v in variants)]  # rows and columns
     variants = [v for v in variants if any((n, v) in cells for n in names)]  # that were run
     # captions large enough to read when the README shows the montage ~900 px wide
-    fig = Figure(figsize=(3.4 * len(variants) + 1.8, 2.15 * len(names) + 0.7), dpi=100)
+    fig = Figure(figsize=(3.4 * len(variants) + 1.8, 2.15 * len(names) + 0.7), dpi=70)
     grid = fig.subplots(len(names), len(variants), squeeze=False)
     for i, n in enumerate(names):
         for j, v in enumerate(variants):

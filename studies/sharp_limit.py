@@ -95,7 +95,7 @@ class Cache:
                   + f"  ({row['seconds']} s)", flush=True)
             self.rows[key] = row
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            write_json_atomic(self.path, dict(sorted(self.rows.items())), indent=0)
+            write_json_atomic(self.path, dict(sorted(self.rows.items())), indent=None)
         return self.rows.get(key)
 
 
@@ -134,7 +134,7 @@ def ade_sharp(cache: Cache, branch: str, v: float, m0: float, kbar: float,
               flush=True)
         cache.rows[key] = row
         cache.path.parent.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(cache.path, dict(sorted(cache.rows.items())), indent=0)
+        write_json_atomic(cache.path, dict(sorted(cache.rows.items())), indent=None)
     return cache.rows.get(key)
 
 

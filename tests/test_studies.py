@@ -440,3 +440,18 @@ def test_committed_report_is_rebuilt_from_its_rows(name, tmp_path, monkeypatch):
                                         *REPORTS[name]])
     changed = [f for f in files if (root / f).read_bytes() != (tmp_path / f).read_bytes()]
     assert not changed, f"{name} --report-only changed {changed}"
+
+
+def test_committed_results_stay_under_5_mb():
+    """A clone carries the results a reader needs, not bulk run data (≤ 5 MB in all)."""
+    import subprocess
+
+    root = STUDIES.parent
+    listed = subprocess.run(["git", "-C", str(root), "ls-files", "studies/results"],
+                            capture_output=True, text=True)
+    if listed.returncode != 0 or not listed.stdout.strip():
+        pytest.skip("not a git checkout: the committed files are not known")
+    sizes = {f: (root / f).stat().st_size for f in listed.stdout.split() if (root / f).is_file()}
+    total = sum(sizes.values())
+    largest = sorted(sizes, key=sizes.get)[-3:]
+    assert total <= 5_000_000, f"{total / 1e6:.2f} MB committed; the largest: {largest}"
