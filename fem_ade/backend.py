@@ -177,6 +177,20 @@ class BackendBase:
         return n
 
     @classmethod
+    def run_options(cls, options: dict) -> dict:
+        """The backend's options as a run records them: those given, and the defaults a run
+        takes that its backend's constructor does not (the FEM's element order)."""
+        return dict(options)
+
+    @classmethod
+    def cells(cls, nodes, **options):
+        """A run's ``n`` as this backend counts it, from the nodes per axis the user gives
+        (``--n``, ``simulate(n=...)``): the grid itself here; ModelError (one line) for a
+        count the backend cannot have. A value that is no count at all is returned as it
+        is, for :meth:`check` to refuse."""
+        return nodes
+
+    @classmethod
     def min_cells(cls, **options) -> int:
         """The smallest n a run takes (a grid of 8 points per axis)."""
         return 8

@@ -89,8 +89,10 @@ class RunConfig:
                     value, (int, float, np.integer, np.floating))):
                 raise ModelError(f"{name} must be a number, got {value!r}")
         options = dict(backend_options or {})
-        if n is None:  # the scene's resolution, as the backend counts it
-            n = backend_class(backend, **options).default_n(scene, **options)
+        counts = backend_class(backend, **options)
+        options = counts.run_options(options)
+        # n: the nodes per axis the user gives, kept as the backend counts them (FEM: cells)
+        n = counts.default_n(scene, **options) if n is None else counts.cells(n, **options)
         dt = scene.dt if dt is None else dt
         if steps is None and until_steady is None:
             steps = scene.steps

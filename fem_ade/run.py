@@ -87,9 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
                    + "; ".join(f"{k}: {v}" for k, v in RECIPES.items())
                    + " (default: paper for the paper's scenes, steady for the vesicle family)")
     p.add_argument("--n", type=int,
-                   help="grid points (spectral) or cells (fem) per direction; the fem has "
-                        "order*n nodes per direction (default: the scene's grid, in nodes: "
-                        "n = scene's n / order cells for the fem)")
+                   help="nodes per axis, for every backend and order (the spectral grid; "
+                        "the fem's n/order cells of order + 1 nodes, so a multiple of --order; "
+                        "axisymmetric: per L at the finest spacing) (default: the scene's grid)")
     p.add_argument("--dt", type=float, help="time step (default: the paper's, per scene)")
     stop = p.add_mutually_exclusive_group()
     stop.add_argument("--steps", type=int, help="number of steps (default: the scene's, 200)")

@@ -4,7 +4,8 @@
   and a branch (:func:`limited`, applied by :func:`fem_ade.runs.simulate`,
   :func:`fem_ade.runs.resume` and :func:`fem_ade.branch.follow`), ``FEM_ADE_BLAS_THREADS=N``
   for N, ``FEM_ADE_BLAS_THREADS=all`` for the library's own choice (all cores). Measured on
-  this 2-core machine, ``discocyte --backend fem --order 4 --n 16 --steps 50``: loop 1.8–1.9 s
+  this 2-core machine, ``discocyte --backend fem --order 4 --n 64 --steps 50`` (16 cells of
+  order 4; the run command counted cells then): loop 1.8–1.9 s
   with one thread against 3.8–4.0 s with the library's default while two other processes ran
   (three tries each, alternating); alone, order 6 on 8 cells: 0.35 s against 0.44 s. The
   FEM's operators are small dense blocks (fast diagonalization, sum factorization): extra

@@ -102,10 +102,10 @@ def run(case: str, eps: float, method: str, resolution, tol: float) -> dict:
     scene = scene_of(case, eps)
     if method == "axi":
         order, npe = resolution
-        kw = {"backend": "fem", "n": cells(eps, order, npe),
+        kw = {"backend": "fem", "n": cells(eps, order, npe) * order,  # nodes per L
               "backend_options": {"geometry": "axisymmetric", "order": order}}
     elif method == "fem3d":
-        kw = {"backend": "fem", "n": resolution // 8, "backend_options": {"order": 8}}
+        kw = {"backend": "fem", "n": resolution // 8 * 8, "backend_options": {"order": 8}}
     else:
         kw = {"backend": "spectral", "n": resolution}
     steady = {**recipe("steady", scene), "until_steady": tol, "max_steps": 60000}

@@ -261,7 +261,7 @@ def main(argv=None) -> dict:
     if not quick:
         print("\n6. time to a steady state (discocyte, 64^3 nodes: stabilized 100x dt, exact "
               "constraints, momentum, until 1e-9)")
-        cases = [("spectral", 64, {}), ("fem", 16, {"order": 4}), ("fem", 64, {"order": 1})]
+        cases = [("spectral", 64, {}), ("fem", 64, {"order": 4}), ("fem", 64, {"order": 1})]
         ends = {}
         for backend, n, options in cases:
             r = time_to_steady(backend, scene, n, 1e-9, **options)

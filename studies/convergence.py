@@ -139,7 +139,7 @@ def command(scene: str, label: str, n: int, steps: int, phi0: str | None = None,
     parts = ["python -m fem_ade.run", scene, "--backend", backend]
     for key, value in options.items():
         parts += [f"--{key}", str(value)]
-    parts += ["--n", str(n), "--steps", str(steps), "--every", str(steps)]
+    parts += ["--n", str(n * order_of(label)), "--steps", str(steps), "--every", str(steps)]
     if phi0:
         parts += ["--phi0", phi0]
     parts += [*extra, "--allow-underresolved", "--no-render", "--quiet"]
@@ -169,7 +169,8 @@ def run(scene, label: str, n: int, steps: int, *, phi0: str | None = None, out=N
     t0 = time.perf_counter()
     cpu = []
     for _ in range(REPEATS if out is None else 1):
-        r = simulate(scene, backend=backend, n=n, steps=steps, every=steps, phi0=phi0,
+        r = simulate(scene, backend=backend, n=n * order_of(label), steps=steps, every=steps,
+                     phi0=phi0,
                      backend_options=dict(options), allow_underresolved=True, render=False,
                      out=out, force=out is not None)
         cpu.append(r.cpu_s + r.setup_cpu_s)
@@ -261,8 +262,9 @@ def steady(plan: dict) -> dict:
     def one(label, n):
         backend, options = METHODS[label]
         t0 = time.perf_counter()
-        r = simulate(scene, backend=backend, n=n, dt=100 * scene.dt, scheme="stabilized",
-                     constraints="exact", accelerate=True, until_steady=1e-10, every=50,
+        r = simulate(scene, backend=backend, n=n * order_of(label), dt=100 * scene.dt,
+                     scheme="stabilized", constraints="exact", accelerate=True,
+                     until_steady=1e-10, every=50,
                      max_steps=20000, backend_options=dict(options), allow_underresolved=True,
                      out=None, render=False)
         sh = r.shape or {}

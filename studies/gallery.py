@@ -95,10 +95,10 @@ def plan(scene_names, backends, variants, quick: bool,
                 n = scene.n * (2 if variant == "d" else 1)
                 if quick:
                     n = 12 if scene.params.L == 1.0 else 24
-                options = {"solver": "fft"} if backend == "fem" else {}
+                options = {"solver": "fft", "order": 1} if backend == "fem" else {}
                 order = fem_order(backend)
                 if order is not None:  # fem-pP: order P on the same nodes (n/P cells)
-                    n, options = max(3, round(n / order)), {"order": order}
+                    n, options = max(3, round(n / order)) * order, {"order": order}
                 kw = {"backend": "spectral" if backend == "spectral" else "fem", "n": n,
                       "every": 50, "backend_options": options,
                       "allow_underresolved": quick, "checkpoint_every": 1000}

@@ -1,7 +1,7 @@
 """The README's picture: the main job — the seeded torus, finite elements of order 4 on 48³
 nodes, run to a steady state (``--recipe steady``).
 
-    python studies/readme_figure.py [--steps K] [--order 4] [--n 12] [--out studies/results/readme]
+    python studies/readme_figure.py [--steps K] [--order 4] [--n 48] [--out studies/results/readme]
 
 Runs the scene through the CLI's Python API, as the README's first command does, and keeps
 its ``shape.png`` as ``torus.png`` (and ``history.png`` as ``torus-history.png``).
@@ -24,7 +24,7 @@ def main(argv=None) -> Path:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=None)
     ap.add_argument("--order", type=int, default=4)
-    ap.add_argument("--n", type=int, default=12)
+    ap.add_argument("--n", type=int, default=48, help="nodes per axis (default %(default)s)")
     ap.add_argument("--out", default="runs/readme",
                     help="default %(default)s; the README's: studies/results/readme")
     args = ap.parse_args(argv)

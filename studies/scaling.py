@@ -70,7 +70,8 @@ def run_case(n: int, ranks: int, steps: int) -> dict:
                OMPI_MCA_rmaps_base_oversubscribe="1", OMP_NUM_THREADS="1")
     with tempfile.TemporaryDirectory(prefix="fem_ade-scaling-") as tmp:
         out, mem = Path(tmp) / "run", Path(tmp) / "memory.json"
-        args = ["discocyte", "--linalg", "petsc", "--n", str(n), "--steps", str(steps),
+        args = ["discocyte", "--linalg", "petsc", "--order", "1", "--n", str(n),
+                "--steps", str(steps),
                 "--every", "1", "--no-render", "--quiet", "--out", str(out),
                 "--allow-underresolved"]
         cmd = [mpirun, "-n", str(ranks), sys.executable, __file__, "--worker", str(mem),

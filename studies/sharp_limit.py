@@ -307,12 +307,12 @@ def phase_field(sharp: dict, branch: str, eps: float, backend: str, folder: Path
                   n=n).validate()
     if backend.startswith("axisymmetric"):
         npe = AXI_CHECK_NODES_PER_EPS if backend.endswith("check") else AXI_NODES_PER_EPS
-        n = math.ceil(npe / (eps * AXI_ORDER) - 1e-9)
-        options = {"backend": "fem", "n": n,
+        n = math.ceil(npe / (eps * AXI_ORDER) - 1e-9)  # cells per L (the row's n)
+        options = {"backend": "fem", "n": n * AXI_ORDER,  # nodes per L
                    "backend_options": {"geometry": "axisymmetric", "order": AXI_ORDER}}
     else:
         options = {"backend": "spectral", "n": n} if backend == "spectral" else {
-            "backend": "fem", "n": n // 4, "backend_options": {"order": 4}}
+            "backend": "fem", "n": n // 4 * 4, "backend_options": {"order": 4}}
     done = ensure(folder, scene, options=dict(recipe("steady", scene), **options, every=50,
                                               render=False, checkpoint_every=CHECKPOINT_EVERY),
                   restart=True).check()

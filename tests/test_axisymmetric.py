@@ -135,7 +135,7 @@ def steady(scene, **kw):
 
 @pytest.fixture(scope="module")
 def axi_steady(prolate_ade):
-    return steady(prolate_ade, backend="fem", n=13,
+    return steady(prolate_ade, backend="fem", n=104,
                   backend_options={"geometry": "axisymmetric", "order": 8})
 
 
@@ -158,7 +158,7 @@ def test_agrees_with_the_3d_spectral_reference_at_steady_state(prolate_ade, axi_
 
 @pytest.mark.slow
 def test_agrees_with_the_3d_fem_at_steady_state(prolate_ade, axi_steady):
-    ref = steady(prolate_ade, backend="fem", n=8, backend_options={"order": 8})
+    ref = steady(prolate_ade, backend="fem", n=64, backend_options={"order": 8})
     for key in KEYS:
         assert axi_steady.final[key] == pytest.approx(ref.final[key], rel=1e-4), key
 
@@ -169,7 +169,7 @@ def test_result_does_not_depend_on_the_domain(prolate_ade):
     square of ΔA − ΔA₀, 400 times as sensitive as ΔA, by < 1e-5). (The
     default domain, the box's cylinder, has the poles 4.5ε from its edges, like the 3D box
     from its images: both differ from the isolated vesicle's E by 3e-5, its G by 0.2 %.)"""
-    runs = [steady(prolate_ade, backend="fem", n=13,
+    runs = [steady(prolate_ade, backend="fem", n=104,
                    backend_options={"geometry": "axisymmetric", "order": 8, "domain": d})
             for d in ("0.8,-0.2,1.2", "1.1,-0.5,1.5")]
     for key in KEYS:
@@ -188,7 +188,7 @@ def test_torus_matches_the_3d_spectral_run():
                     effects=frozenset({"bending", "volume", "area"}),
                     volume_functional="localized")
     scene = Scene("clifford", params, 0.0075 * eps**3, Torus((0.5, 0.5, 0.5), R, r), n=48)
-    axi = steady(scene, backend="fem", n=13, backend_options={"geometry": "axisymmetric",
+    axi = steady(scene, backend="fem", n=104, backend_options={"geometry": "axisymmetric",
                                                                "order": 8})
     ref = steady(scene, backend="spectral", n=48)
     assert axi.shape["label"] == "torus" and axi.shape["genus"] == [1]

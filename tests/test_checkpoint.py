@@ -29,7 +29,7 @@ def _same_run(a, b):
 def test_resume_is_bit_identical(cli, tmp_path, backend, constraints):
     """Exact constraints resume in the middle of their targets' ramp (17 steps); the FEM's
     direct Fourier path (``fft``) keeps φ̂ as its state."""
-    solver = ["--solver", "fft"] if backend == "fem-fft" else []
+    solver = ["--solver", "fft", "--order", "1"] if backend == "fem-fft" else []
     common = ["discocyte", "--backend", backend.split("-")[0], *solver, "--n", "16", "--every",
               "5", "--quiet", "--allow-underresolved", "--constraints", constraints,
               "--no-render"]

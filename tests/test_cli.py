@@ -89,7 +89,8 @@ def test_printed_ic_diverges_cleanly_on_the_fem_mesh(cli, tmp_path):
     steps; only the earlier 27-point Q1 stencil outlived it on coarse grids), and stops the
     same clean way: exit 3, the diagnosis, finite rows, the last finite state saved."""
     out = tmp_path / "P"
-    r = cli(["discocyte", "--ic", "printed", "--n", "24", "--allow-underresolved", "--steps",
+    r = cli(["discocyte", "--ic", "printed", "--order", "1", "--n", "24",
+             "--allow-underresolved", "--steps",
              "100", "--every", "1", "--out", out, "--quiet", "--no-render"])
     assert r.returncode == 3, r.stdout + r.stderr
     assert "explicit area penalty" in r.stderr and "diverged at step" in r.stderr
@@ -105,7 +106,9 @@ BAD = [
     (["discocyte", "--dt", "0"], "time step must be positive"),
     (["discocyte", "--dt=-1e-7"], "time step must be positive"),
     (["discocyte", "--dt", "1e-4"], "eps^3/kappa"),
-    (["discocyte", "--n", "4"], "n must be"),
+    (["discocyte", "--n", "4"], "the FEM of order 4 needs at least 12 nodes per axis"),
+    (["discocyte", "--n", "18"], "--n 18 nodes per axis is not a multiple of the order 4"),
+    (["discocyte", "--backend", "spectral", "--n", "4"], "n must be"),
     (["two-spheres", "--n", "32"], "grid too coarse"),
     (["discocyte", "--steps", "ten"], "invalid int"),
     (["discocyte", "--backend", "lattice"], "invalid choice"),
@@ -161,7 +164,7 @@ def test_progress_toward_a_steady_state_tells_the_truth(cli, tmp_path):
     from fem_ade.render import run_label
 
     out = tmp_path / "S"
-    r = cli(["discocyte", "--recipe", "steady", "--order", "4", "--n", "4",
+    r = cli(["discocyte", "--recipe", "steady", "--order", "4", "--n", "16",
              "--allow-underresolved", "--out", out, "--no-render"])
     assert r.returncode == 0, r.stderr
     frames = r.stderr.replace("\r", "\n").splitlines()

@@ -102,7 +102,7 @@ def check_cost(result, out):
     for r in runs:
         assert r["command"].startswith(f"python -m fem_ade.run {r['scene']} --backend "
                                        f"{r['method']}"), r
-        assert f"--n {r['n']} " in r["command"]
+        assert f"--n {r['nodes']} " in r["command"]  # --n counts nodes, for every order
         if r["method"] == "fem":
             assert f"--order {r['order']}" in r["command"]
             assert r["nodes"] == r["order"] * r["n"]
@@ -238,6 +238,13 @@ def check_regenerate(result, out):
     studies = {p.stem for p in SCRIPTS} - {"regenerate"}
     assert set(result) == studies, set(result) ^ studies
     assert all("--out studies/results" in line for line in result.values()), result
+    from fem_ade.sweep import load_sweep
+
+    listed = _load(STUDIES / "regenerate.py").SWEEP_FILES
+    for name, files in listed.items():  # each listed sweep file is one that loads
+        assert name in result and all(f in result[name] for f in files)
+        for f in files:
+            assert load_sweep(STUDIES.parent / f).points()
 
 
 def check_sharp_limit(result, out):
@@ -313,7 +320,7 @@ def check_phase_diagram(result, out):
     assert (out / "phase_diagram" / "ade-quick" / "phase-diagram.png").is_file()
 
 
-ARGS = {"readme_figure": ["--steps", "2", "--n", "6"]}
+ARGS = {"readme_figure": ["--steps", "2", "--n", "24"]}
 #: where each study writes by default (under the current directory)
 DEFAULT_OUT = {"gallery": "runs/gallery", "readme_figure": "runs/readme"}
 

@@ -296,6 +296,11 @@ class AxisymmetricFEMBackend(FEMBackend):
         return default_cells(scene.params.eps, scene.params.L, int(order))
 
     @classmethod
+    def run_options(cls, options: dict) -> dict:
+        """The order of a run that gives none: :data:`DEFAULT_ORDER`."""
+        return {"order": DEFAULT_ORDER, **options}
+
+    @classmethod
     def nodes_per_axis(cls, n: int, **options) -> int | None:
         """None: the (r, z) grid is no cubic grid (run.json keeps the scene's n)."""
         return None

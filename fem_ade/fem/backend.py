@@ -102,6 +102,9 @@ class FEMBackend(BackendBase):
     #: file (scikit-fem's matrices and AMG: 2.7 kB per unknown measured for Q1)
     bytes_per_dof = 400.0
     bytes_per_krylov_dof = 1500.0
+    #: the element order of a run that gives none: the cost study's best at moderate
+    #: accuracy (studies/results/cost.md; the constructor's own default stays 1)
+    RUN_ORDER = 4
     bytes_per_assembled_dof = 4000.0
 
     @classmethod
@@ -121,6 +124,38 @@ class FEMBackend(BackendBase):
         if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order <= 1:
             return scene.n
         return max(fmesh.MIN_CELLS, round(scene.n / int(order)))
+
+    @classmethod
+    def run_options(cls, options: dict) -> dict:
+        """The order of a run that gives none: :data:`RUN_ORDER` on a tensor mesh, 1 on a
+        mesh file (which takes 1 or 2)."""
+        options = dict(options)
+        if "order" not in options:
+            tensor = fmesh.parse_option(options.get("mesh"))[0] in ("uniform", "graded")
+            options["order"] = cls.RUN_ORDER if tensor else 1
+        return options
+
+    @classmethod
+    def cells(cls, nodes, *, order: int = 1, mesh=None, **options):
+        """Cells per axis from ``nodes`` per axis: nodes/p on a tensor mesh, where p must
+        divide them and leave :meth:`min_cells`; a mesh file's n is not used (the file
+        sets the resolution), so it is returned as it is."""
+        counts = (isinstance(nodes, (int, np.integer)) and not isinstance(nodes, bool)
+                  and isinstance(order, (int, np.integer)) and not isinstance(order, bool)
+                  and order >= 1)
+        tensor = fmesh.parse_option(mesh)[0] in ("uniform", "graded") if counts else False
+        if not tensor:
+            return nodes
+        least = int(order) * cls.min_cells(order=order, mesh=mesh, **options)
+        if nodes < least:
+            raise ModelError(f"--n {nodes}: the FEM of order {order} needs at least {least} "
+                             f"nodes per axis ({least // order} cells of {order} + 1 nodes)")
+        if nodes % order:
+            low = nodes // order * order
+            raise ModelError(f"--n {nodes} nodes per axis is not a multiple of the order "
+                             f"{order} (the FEM has order x cells nodes per axis): give "
+                             f"{max(low, least)} or {low + order}")
+        return int(nodes) // int(order)
 
     @classmethod
     def nodes_per_axis(cls, n: int, *, order: int = 1, mesh=None, **options) -> int | None:
