@@ -4,7 +4,11 @@ Every study writes under ``runs/`` (ignored by git) unless told otherwise; this 
 each of them with the committed folder as ``--out``, in an order where each finds what it
 reads (cost.py reads convergence.json and axisymmetric.md). The whole set takes hours on 2
 cores (the gallery most of them); ``--only`` picks studies, ``--dry-run`` prints the
-commands.
+commands, each with the sweep files it runs (:data:`SWEEP_FILES`). The studies that keep run
+folders (the gallery, the constraints and sharp-limit studies, the non-axisymmetric check,
+the sweeps' points) make them through :func:`fem_ade.jobs.ensure`, so a killed regeneration
+goes on where it stopped; seven rebuild their committed report from their committed rows
+with ``--report-only`` (``tests/test_studies.py`` checks it byte for byte).
 
     python studies/regenerate.py --dry-run
     python studies/regenerate.py --only convergence cost bench
@@ -40,6 +44,13 @@ STEPS = (
 )
 
 
+#: the sweep files a study runs through fem_ade.sweep (the others are scripts that run their
+#: points through fem_ade.jobs.ensure: their points depend on each other — the gallery's kicks
+#: start from a run's end, the constraints study's Δt comes from a trial, the branches'
+#: lines from their neighbours — or are not runs at all, as the benchmarks)
+SWEEP_FILES = {"phase_diagram": ("studies/sweeps/minimal.toml", "studies/sweeps/ade.toml")}
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--only", nargs="*", choices=[name for name, _ in STEPS], default=None)
@@ -49,7 +60,9 @@ def main(argv=None) -> dict:
     chosen = [(name, cmd) for name, cmd in STEPS if args.only is None or name in args.only]
     done = {}
     for name, cmd in chosen:
-        line = " ".join(["python", *cmd])
+        sweeps = SWEEP_FILES.get(name)
+        line = " ".join(["python", *cmd]) + (f"    # sweeps: {', '.join(sweeps)}" if sweeps
+                                             else "")
         print(line, flush=True)
         if args.dry_run or args.quick:
             done[name] = line
