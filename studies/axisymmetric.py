@@ -236,6 +236,7 @@ def cost_stage(runs: Runs, plan, compute=True) -> dict:
 # the report
 # ---------------------------------------------------------------------------------------------
 def report(runs: Runs, out: Path, plan, compute=False) -> dict:
+    """axisymmetric.md and .json (and the cost figure, bench.json's block) from the runs."""
     rows = resolution_stage(runs, plan, compute=compute)
     cost = cost_stage(runs, plan, compute=compute)
     lines = ["# The axisymmetric geometry: resolution and cost", "",
@@ -243,71 +244,10 @@ def report(runs: Runs, out: Path, plan, compute=False) -> dict:
              "thread (set-up and loop); errors are relative errors in E.", ""]
     choice = {}
     if rows:
-        lines += ["## How many nodes per ε", "",
-                  f"Seeded steady states (relative energy change per step < "
-                  f"{TOL['resolution']:g}); the error in E against order "
-                  f"{plan.reference[0]} at {plan.reference[1]:g} nodes per ε, the largest "
-                  "over the shapes "
-                  f"({', '.join(plan.cases)}):", "",
-                  "| order | nodes per ε | " + " | ".join(f"ε = {e:g}" for e in plan.eps)
-                  + " | worst shape |", "|---|---|" + "---|" * (len(plan.eps) + 1)]
-        for order in plan.orders:
-            for npe in plan.nodes_per_eps:
-                cells_ = []
-                worst = max((r for r in rows if r["order"] == order
-                             and r["nodes_per_eps"] == npe), key=lambda r: r["error"],
-                            default=None)
-                for eps in plan.eps:
-                    errs = [r["error"] for r in rows if r["order"] == order
-                            and r["nodes_per_eps"] == npe and r["eps"] == eps]
-                    cells_.append(f"{max(errs):.1e}" if errs else "")
-                lines.append(f"| {order} | {npe:g} | " + " | ".join(cells_) + " | "
-                             + (worst["case"] if worst else "") + " |")
-            choice[order] = default_choice(rows, order)
-        lines += ["", "The fewest nodes per ε with every error below 1e-4: "
-                  + "; ".join(f"order {o}: {'—' if c is None else f'{c:g}'}"
-                              for o, c in choice.items()) + ".", ""]
-        changed = [r for r in rows if r["label"] != r["ref_label"]]
-        if changed:
-            lines += ["Runs whose shape label differs from the reference's: "
-                      + ", ".join(f"{r['case']} ε = {r['eps']:g} p = {r['order']} "
-                                  f"{r['nodes_per_eps']:g}/ε: {r['label']}"
-                                  for r in changed) + ".", ""]
+        section, choice = resolution_section(rows, plan)
+        lines += section
     if cost and any(cost["runs"].values()):
-        lines += [f"## What a steady state costs ({cost['case']}, ε = {cost['eps']:g})", "",
-                  "Seeded from the sharp shape, the `steady` recipe to a relative energy "
-                  f"change per step of {TOL['cost']:g}; the error in E against the "
-                  f"axisymmetric run at {plan.reference[1]:g} nodes per ε "
-                  f"(E = {cost['reference_E']:.10f}).", "",
-                  "| method | resolution | steps | CPU s | error in E |", "|---|---|---|---|---|"]
-        for name, pts in cost["runs"].items():
-            for p in pts:
-                res = p["resolution"]
-                res = (f"{res[1]:g} nodes per ε" if isinstance(res, list) else
-                       f"{res} nodes per axis")
-                lines.append(f"| {name} | {res} | {p['steps']} | {p['cpu_s']:.3g} | "
-                             f"{p['error']:.1e} |")
-        lines += ["", "CPU seconds to reach an error in E of:", "",
-                  "| method | " + " | ".join(f"{t:g}" for t in TARGETS) + " |",
-                  "|---|" + "---|" * len(TARGETS)]
-        for name, tt in cost["time_to"].items():
-            lines.append(f"| {name} | " + " | ".join(
-                "—" if tt[str(t)] is None else f"{tt[str(t)]:.3g}" for t in TARGETS) + " |")
-        lines.append("| **3D spectral / axisymmetric** | " + " | ".join(
-            "—" if cost["spectral_over_axisymmetric"][str(t)] is None
-            else f"**{cost['spectral_over_axisymmetric'][str(t)]:.0f}×**" for t in TARGETS)
-            + " |")
-        lines.append("| 3D FEM / axisymmetric | " + " | ".join(
-            "—" if cost["fem3d_over_axisymmetric"][str(t)] is None
-            else f"{cost['fem3d_over_axisymmetric'][str(t)]:.0f}×" for t in TARGETS) + " |")
-        lines += ["", "(— : no measured resolution of that method reached the accuracy.)", "",
-                  "![error in E against CPU time](axisymmetric-cost.png)", ""]
-        if cost.get("fine"):
-            f = cost["fine"]
-            lines += [f"A steady state at ε = {f['eps']:g} with the default resolution "
-                      f"(order {f['resolution'][0]}, {f['resolution'][1]:g} nodes per ε, "
-                      f"n = {f['n']}): {f['steps']} steps, {f['cpu_s']:.3g} s CPU, "
-                      f"{f['wall_s']:.3g} s wall (one thread).", ""]
+        lines += cost_section(cost, plan)
         cost_figure(cost, out / "axisymmetric-cost.png")
     notes = out / "axisymmetric" / "notes.md"
     if notes.is_file():
@@ -318,6 +258,79 @@ def report(runs: Runs, out: Path, plan, compute=False) -> dict:
     if cost and any(cost["runs"].values()):
         merge_bench(out / "bench.json", cost)
     return payload
+
+
+def resolution_section(rows: list[dict], plan) -> tuple[list[str], dict]:
+    """The table of errors against order and nodes per ε; (lines, the default per order)."""
+    lines = ["## How many nodes per ε", "",
+             f"Seeded steady states (relative energy change per step < "
+             f"{TOL['resolution']:g}); the error in E against order "
+             f"{plan.reference[0]} at {plan.reference[1]:g} nodes per ε, the largest "
+             "over the shapes "
+             f"({', '.join(plan.cases)}):", "",
+             "| order | nodes per ε | " + " | ".join(f"ε = {e:g}" for e in plan.eps)
+             + " | worst shape |", "|---|---|" + "---|" * (len(plan.eps) + 1)]
+    choice = {}
+    for order in plan.orders:
+        for npe in plan.nodes_per_eps:
+            mine = [r for r in rows if r["order"] == order and r["nodes_per_eps"] == npe]
+            worst = max(mine, key=lambda r: r["error"], default=None)
+            cells_ = []
+            for eps in plan.eps:
+                errs = [r["error"] for r in mine if r["eps"] == eps]
+                cells_.append(f"{max(errs):.1e}" if errs else "")
+            lines.append(f"| {order} | {npe:g} | " + " | ".join(cells_) + " | "
+                         + (worst["case"] if worst else "") + " |")
+        choice[order] = default_choice(rows, order)
+    lines += ["", "The fewest nodes per ε with every error below 1e-4: "
+              + "; ".join(f"order {o}: {'—' if c is None else f'{c:g}'}"
+                          for o, c in choice.items()) + ".", ""]
+    changed = [r for r in rows if r["label"] != r["ref_label"]]
+    if changed:
+        lines += ["Runs whose shape label differs from the reference's: "
+                  + ", ".join(f"{r['case']} ε = {r['eps']:g} p = {r['order']} "
+                              f"{r['nodes_per_eps']:g}/ε: {r['label']}"
+                              for r in changed) + ".", ""]
+    return lines, choice
+
+
+def cost_section(cost: dict, plan) -> list[str]:
+    """What a steady state costs, per method, and the time to each accuracy."""
+    lines = [f"## What a steady state costs ({cost['case']}, ε = {cost['eps']:g})", "",
+             "Seeded from the sharp shape, the `steady` recipe to a relative energy "
+             f"change per step of {TOL['cost']:g}; the error in E against the "
+             f"axisymmetric run at {plan.reference[1]:g} nodes per ε "
+             f"(E = {cost['reference_E']:.10f}).", "",
+             "| method | resolution | steps | CPU s | error in E |", "|---|---|---|---|---|"]
+    for name, pts in cost["runs"].items():
+        for p in pts:
+            res = p["resolution"]
+            res = (f"{res[1]:g} nodes per ε" if isinstance(res, list) else
+                   f"{res} nodes per axis")
+            lines.append(f"| {name} | {res} | {p['steps']} | {p['cpu_s']:.3g} | "
+                         f"{p['error']:.1e} |")
+    lines += ["", "CPU seconds to reach an error in E of:", "",
+              "| method | " + " | ".join(f"{t:g}" for t in TARGETS) + " |",
+              "|---|" + "---|" * len(TARGETS)]
+    for name, tt in cost["time_to"].items():
+        lines.append(f"| {name} | " + " | ".join(
+            "—" if tt[str(t)] is None else f"{tt[str(t)]:.3g}" for t in TARGETS) + " |")
+    lines.append("| **3D spectral / axisymmetric** | " + " | ".join(
+        "—" if cost["spectral_over_axisymmetric"][str(t)] is None
+        else f"**{cost['spectral_over_axisymmetric'][str(t)]:.0f}×**" for t in TARGETS)
+        + " |")
+    lines.append("| 3D FEM / axisymmetric | " + " | ".join(
+        "—" if cost["fem3d_over_axisymmetric"][str(t)] is None
+        else f"{cost['fem3d_over_axisymmetric'][str(t)]:.0f}×" for t in TARGETS) + " |")
+    lines += ["", "(— : no measured resolution of that method reached the accuracy.)", "",
+              "![error in E against CPU time](axisymmetric-cost.png)", ""]
+    if cost.get("fine"):
+        f = cost["fine"]
+        lines += [f"A steady state at ε = {f['eps']:g} with the default resolution "
+                  f"(order {f['resolution'][0]}, {f['resolution'][1]:g} nodes per ε, "
+                  f"n = {f['n']}): {f['steps']} steps, {f['cpu_s']:.3g} s CPU, "
+                  f"{f['wall_s']:.3g} s wall (one thread).", ""]
+    return lines
 
 
 def cost_figure(cost: dict, path: Path) -> None:

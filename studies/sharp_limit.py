@@ -412,6 +412,43 @@ def eps_rows(runs: dict, cache: Cache, backend: str, plan) -> list[dict]:
 
 
 def report(cache: Cache, out: Path, plan=FULL) -> dict:
+    """sharp_limit.md, sharp_limit.json and the pictures from the caches (nothing is run)."""
+    lines, rows, extra, table = branches_section(cache, plan)
+    crossings = [crossing(cache, *t, compute=False) for t in plan.transitions]
+    lines += crossings_section(crossings)
+    runs_path = out / "sharp" / "runs.json"
+    runs = json.loads(runs_path.read_text()) if runs_path.is_file() else {}
+    eps_table = []
+    for backend in ("spectral", "fem", "axisymmetric"):
+        rows_b = eps_rows(runs, cache, backend, plan)
+        if rows_b:
+            eps_table += rows_b
+            lines += eps_section(backend, rows_b, eps_of(plan, backend), runs)
+    if eps_table:
+        lines += ["", "![e over e_sharp against ε²](sharp-eps.png)", "",
+                  "![the phase field's φ = 0 over the sharp meridian](sharp-sections.png)", ""]
+    ade = ade_rows(cache, runs, plan)
+    lines += ade_report(ade)
+    trans = transition_rows(cache, runs, plan)
+    lines += transitions_report(trans, plan)
+    notes = out / "sharp" / "notes.md"
+    if notes.is_file():
+        lines += [notes.read_text().strip(), ""]
+    (out / "sharp_limit.md").write_text("\n".join(lines))
+    payload = {"rows": eps_table, "ade": ade, "phase_field_transitions": trans,
+               "branches": [{k: r[k] for k in r if k not in ("r", "z")} for r in rows],
+               "exact": [{k: r[k] for k in r if k not in ("r", "z")} for r in extra if r],
+               "lowest": table, "transitions": crossings}
+    (out / "sharp_limit.json").write_text(json.dumps(payload, indent=1) + "\n")
+    figure(cache, out / "sharp-branches.png", crossings, plan)
+    if eps_table:
+        eps_figures(eps_table, runs, cache, out)
+    return payload
+
+
+def branches_section(cache: Cache, plan) -> tuple[list[str], list, list, list]:
+    """The report's head, exact values and branch table: (lines, the branches' rows, the
+    sphere's and Clifford torus's, the lowest branch per v)."""
     rows, table = [], []
     for branch in plan.columns:
         for v in plan.grid:
@@ -446,98 +483,81 @@ def report(cache: Cache, out: Path, plan=FULL) -> dict:
                       **{b: have.get(b) for b in plan.columns}})
     lines += ["", "![w along the branches; meridians](sharp-branches.png)", "",
               "— : the branch is not found there; why:", ""]
-    for r in rows:
-        if "missing" in r:
-            lines.append(f"- {r['branch']} at v = {r['v']:.2f}: {r['missing']}")
-    crossings = [crossing(cache, *t, compute=False) for t in plan.transitions]
-    lines += ["", "## Where the lowest branch changes", "",
-              "| from (above) | to (below) | v | w there | literature |", "|---|---|---|---|---|"]
+    lines += [f"- {r['branch']} at v = {r['v']:.2f}: {r['missing']}" for r in rows
+              if "missing" in r]
+    return lines, rows, extra, table
+
+
+def crossings_section(crossings) -> list[str]:
+    lines = ["", "## Where the lowest branch changes", "",
+             "| from (above) | to (below) | v | w there | literature |", "|---|---|---|---|---|"]
     for c, lit in zip(crossings, ("0.652", "0.592")[:len(crossings)], strict=True):
         v = "—" if c["v"] is None else f"{c['v']:.4f}"
         w = f"{c['w']:.6f}" if c.get("w") else c.get("note", "")
         lines.append(f"| {c['between'][0]} | {c['between'][1]} | {v} | {w} | {lit} |")
-    lines += ["", "Literature: Seifert, Berndl & Lipowsky, Phys. Rev. A 44, 1182 (1991).", ""]
-    runs_path = out / "sharp" / "runs.json"
-    runs = json.loads(runs_path.read_text()) if runs_path.is_file() else {}
-    eps_table = []
-    names = {"spectral": "spectral", "fem": "FEM, order 4 on the same nodes",
+    return lines + ["", "Literature: Seifert, Berndl & Lipowsky, Phys. Rev. A 44, 1182 (1991).",
+                    ""]
+
+
+#: the ε sections' titles, per backend
+EPS_NAMES = {"spectral": "spectral", "fem": "FEM, order 4 on the same nodes",
              "axisymmetric": f"axisymmetric FEM, order {AXI_ORDER}, {AXI_NODES_PER_EPS:g} "
                              "nodes per ε"}
-    for backend in ("spectral", "fem", "axisymmetric"):
-        rows_b = eps_rows(runs, cache, backend, plan)
-        if not rows_b:
-            continue
-        eps_table += rows_b
-        eps_b = eps_of(plan, backend)
-        axi = backend == "axisymmetric"
-        grid_note = (f"(n = {', '.join(str(round(NODES_PER_EPS / e)) for e in eps_b)})"
-                     if not axi else f"(order {AXI_ORDER}, {AXI_NODES_PER_EPS:g} nodes per ε; "
-                     f"disc/Δε: the largest |e(3.5/ε) − e({AXI_CHECK_NODES_PER_EPS:g}/ε)| over "
-                     "|e − e_sharp| along ε, a bound on the discretization error over the ε "
-                     "effect)")
-        lines += ["", f"## The limit ε → 0 ({names[backend]})", "",
-                  f"e = W / W_sphere,sharp at ε = {', '.join(str(e) for e in eps_b)} "
-                  f"{grid_note}; † the run left the branch (its label); p the observed order; "
-                  "e₀ the extrapolation; gap/ε the sharp surface's narrowest passage (a "
-                  "waist, a neck, a thin centre, a torus's hole) over the smallest ε run.", "",
-                  "| branch | v | R₀ | gap/ε | " + " | ".join(f"ε = {e}" for e in eps_b)
-                  + " | p | e₀ | sharp | e₀/sharp − 1 |" + (" disc/Δε |" if axi else ""),
-                  "|---|---|---|---|" + "---|" * len(eps_b) + "---|---|---|---|"
-                  + ("---|" if axi else "")]
-        for r in rows_b:
-            cells = []
-            for e in eps_b:
-                if e in r["eps"]:
-                    i = r["eps"].index(e)
-                    cells.append(f"{r['e_phase_field'][i]:.5f}" + (
-                        "" if r["kept_branch"][i] else f" † {r['labels'][i]}"))
-                else:
-                    cells.append("")
-            ex = r["e_extrapolated"]
-            g = "—" if r["gap_over_eps"] is None else f"{r['gap_over_eps']:.1f}"
-            disc = ""
-            if axi:
-                d = r.get("disc_over_eps_effect")
-                disc = " " + ("—" if d is None else f"{d:.1e}") + " |"
-            lines.append(f"| {r['branch']} | {r['v']:.4f} | {r['R0']:.3f} | {g} | "
-                         + " | ".join(cells)
-                         + (f" | {r['order']:.2f}{'' if r['order_observed'] else ' (assumed)'} | "
-                            f"{ex:.5f} | {r['e_sharp']:.5f} | "
-                            f"{r['rel_diff']:+.2%} |" if ex is not None else
-                            f" | | | {r['e_sharp']:.5f} | — |") + disc)
-        lines.append("")
-        for eps in eps_b:
-            costs = [x for k, x in runs.items() if k.startswith(backend + "/")
-                     and x["eps"] == eps]
-            if costs:
-                cpu = [c["cpu_s"] for c in costs if "cpu_s" in c]
-                lines += [f"- ε = {eps} (n = {costs[0]['n']}): a run took "
-                          f"{min(c['seconds'] for c in costs):.0f}–"
-                          f"{max(c['seconds'] for c in costs):.0f} s, "
-                          f"{min(c['steps'] for c in costs)}–{max(c['steps'] for c in costs)} "
-                          "steps (wall, this 2-core machine"
-                          + (f"; {min(cpu):.2g}–{max(cpu):.2g} s CPU of the set-up and loop"
-                             if cpu else "") + ")"]
-    if eps_table:
-        lines += ["", "![e over e_sharp against ε²](sharp-eps.png)", "",
-                  "![the phase field's φ = 0 over the sharp meridian](sharp-sections.png)", ""]
-    ade = ade_rows(cache, runs, plan)
-    lines += ade_report(ade)
-    trans = transition_rows(cache, runs, plan)
-    lines += transitions_report(trans, plan)
-    notes = out / "sharp" / "notes.md"
-    if notes.is_file():
-        lines += [notes.read_text().strip(), ""]
-    (out / "sharp_limit.md").write_text("\n".join(lines))
-    payload = {"rows": eps_table, "ade": ade, "phase_field_transitions": trans,
-               "branches": [{k: r[k] for k in r if k not in ("r", "z")} for r in rows],
-               "exact": [{k: r[k] for k in r if k not in ("r", "z")} for r in extra if r],
-               "lowest": table, "transitions": crossings}
-    (out / "sharp_limit.json").write_text(json.dumps(payload, indent=1) + "\n")
-    figure(cache, out / "sharp-branches.png", crossings, plan)
-    if eps_table:
-        eps_figures(eps_table, runs, cache, out)
-    return payload
+
+
+def eps_section(backend: str, rows_b: list[dict], eps_b, runs: dict) -> list[str]:
+    """One backend's table of e against ε, its extrapolation, and what a run cost."""
+    axi = backend == "axisymmetric"
+    grid_note = (f"(n = {', '.join(str(round(NODES_PER_EPS / e)) for e in eps_b)})"
+                 if not axi else f"(order {AXI_ORDER}, {AXI_NODES_PER_EPS:g} nodes per ε; "
+                 f"disc/Δε: the largest |e(3.5/ε) − e({AXI_CHECK_NODES_PER_EPS:g}/ε)| over "
+                 "|e − e_sharp| along ε, a bound on the discretization error over the ε "
+                 "effect)")
+    lines = ["", f"## The limit ε → 0 ({EPS_NAMES[backend]})", "",
+             f"e = W / W_sphere,sharp at ε = {', '.join(str(e) for e in eps_b)} "
+             f"{grid_note}; † the run left the branch (its label); p the observed order; "
+             "e₀ the extrapolation; gap/ε the sharp surface's narrowest passage (a "
+             "waist, a neck, a thin centre, a torus's hole) over the smallest ε run.", "",
+             "| branch | v | R₀ | gap/ε | " + " | ".join(f"ε = {e}" for e in eps_b)
+             + " | p | e₀ | sharp | e₀/sharp − 1 |" + (" disc/Δε |" if axi else ""),
+             "|---|---|---|---|" + "---|" * len(eps_b) + "---|---|---|---|"
+             + ("---|" if axi else "")]
+    lines += [eps_line(r, eps_b, axi) for r in rows_b]
+    lines.append("")
+    for eps in eps_b:
+        costs = [x for k, x in runs.items() if k.startswith(backend + "/") and x["eps"] == eps]
+        if costs:
+            cpu = [c["cpu_s"] for c in costs if "cpu_s" in c]
+            lines += [f"- ε = {eps} (n = {costs[0]['n']}): a run took "
+                      f"{min(c['seconds'] for c in costs):.0f}–"
+                      f"{max(c['seconds'] for c in costs):.0f} s, "
+                      f"{min(c['steps'] for c in costs)}–{max(c['steps'] for c in costs)} "
+                      "steps (wall, this 2-core machine"
+                      + (f"; {min(cpu):.2g}–{max(cpu):.2g} s CPU of the set-up and loop"
+                         if cpu else "") + ")"]
+    return lines
+
+
+def eps_line(r: dict, eps_b, axi: bool) -> str:
+    """One branch point's row of the ε table."""
+    cells = []
+    for e in eps_b:
+        if e in r["eps"]:
+            i = r["eps"].index(e)
+            cells.append(f"{r['e_phase_field'][i]:.5f}" + (
+                "" if r["kept_branch"][i] else f" † {r['labels'][i]}"))
+        else:
+            cells.append("")
+    ex = r["e_extrapolated"]
+    g = "—" if r["gap_over_eps"] is None else f"{r['gap_over_eps']:.1f}"
+    disc = ""
+    if axi:
+        d = r.get("disc_over_eps_effect")
+        disc = " " + ("—" if d is None else f"{d:.1e}") + " |"
+    return (f"| {r['branch']} | {r['v']:.4f} | {r['R0']:.3f} | {g} | " + " | ".join(cells)
+            + (f" | {r['order']:.2f}{'' if r['order_observed'] else ' (assumed)'} | "
+               f"{ex:.5f} | {r['e_sharp']:.5f} | {r['rel_diff']:+.2%} |" if ex is not None
+               else f" | | | {r['e_sharp']:.5f} | — |") + disc)
 
 
 def figure(cache: Cache, path: Path, crossings, plan) -> None:
