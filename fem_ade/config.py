@@ -11,23 +11,11 @@ backend's ``set_dt``.
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 
-from .model import ModelError, max_stable_dt
-
-
-def _int(value, low: int) -> bool:
-    return (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
-            and value >= low)
-
-
-def _real(value) -> bool:
-    """A real, finite number (not a bool)."""
-    return (isinstance(value, (int, float, np.integer, np.floating))
-            and not isinstance(value, bool) and math.isfinite(float(value)))
+from .model import ModelError, is_int, is_real, max_stable_dt
 
 
 @dataclass(frozen=True)
@@ -98,7 +86,7 @@ class RunConfig:
             steps = scene.steps
         scheme = kwargs.get("scheme", "paper")
         if adaptive is True:
-            if not (_real(dt) and dt > 0):
+            if not (is_real(dt) and dt > 0):
                 raise ModelError(f"--dt must be a positive number, got {dt}")
             dt_max = 1000 * dt if scheme == "stabilized" else min(
                 1000 * dt, 0.9 * max_stable_dt(scene.params))
@@ -120,9 +108,9 @@ class RunConfig:
 
         if not isinstance(self.backend_options, dict):
             raise ModelError(f"backend_options must be a table, got {self.backend_options!r}")
-        if not _real(self.perturb) or self.perturb < 0:
+        if not is_real(self.perturb) or self.perturb < 0:
             raise ModelError(f"--perturb must be a number >= 0, got {self.perturb!r}")
-        if not _int(self.seed, 0):
+        if not is_int(self.seed, 0):
             raise ModelError(f"--seed must be an integer >= 0, got {self.seed!r}")
         check_backend(self.backend, scene, n=self.n, dt=self.dt, scheme=self.scheme,
                       constraints=self.constraints, allow_underresolved=allow_underresolved,
@@ -183,7 +171,7 @@ def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_ever
                              ("save-every", save_every, 1), ("shape-every", shape_every, 1)):
         if value is None:
             continue
-        if not _int(value, low):
+        if not is_int(value, low):
             raise ModelError(f"--{name} must be an integer >= {low}, got {value}")
-    if until_steady is not None and not (_real(until_steady) and until_steady > 0):
+    if until_steady is not None and not (is_real(until_steady) and until_steady > 0):
         raise ModelError(f"--until-steady must be a positive number, got {until_steady}")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
+from numbers import Integral, Real
 
 from .registry import CONSTRAINTS, VOLUMES
 
@@ -29,6 +30,17 @@ PHYSICS_VERSION = "2026.12-1"
 
 class ModelError(ValueError):
     """Invalid model input: a parameter, a scene or a scene file. The message is one line."""
+
+
+def is_int(value, low: int) -> bool:
+    """An integer (numpy's too, not a bool) of at least ``low``: the one check of a count."""
+    return isinstance(value, Integral) and not isinstance(value, bool) and value >= low
+
+
+def is_real(value) -> bool:
+    """A real, finite number (numpy's too, not a bool): the one check of a number."""
+    return (isinstance(value, Real) and not isinstance(value, bool)
+            and math.isfinite(float(value)))
 
 
 @dataclass(frozen=True)

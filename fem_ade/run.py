@@ -31,8 +31,6 @@ from .status import Status
 EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED = 2, 3, 130
 #: the options --resume takes; every other one is stored in the run folder
 RESUME_OPTIONS = {"resume", "steps", "quiet"}
-#: the vesicle scene's options (fem_ade.vesicle.Vesicle's fields) and its branches
-VESICLE_OPTIONS = ("v", "da0", "kbar", "C", "eps", "branch", "R0")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -162,6 +160,16 @@ def build_parser() -> argparse.ArgumentParser:
             group.add_argument(f"--{o.name}", type=o.type, choices=o.choices, default=None,
                                help=o.help)
     return p
+
+
+def vesicle_options() -> tuple[str, ...]:
+    """The vesicle scene's options: :class:`fem_ade.vesicle.Vesicle`'s fields but the box
+    (each is a ``--NAME`` of the parser's vesicle group)."""
+    from dataclasses import fields
+
+    from .vesicle import Vesicle
+
+    return tuple(f.name for f in fields(Vesicle) if f.name != "L")
 
 
 def list_scenes() -> str:
@@ -331,7 +339,7 @@ def _main(argv, scratch: str | None = None) -> int:
         from .runs import recipe
         from .scenes import resolve_scene
 
-        chosen = {k: getattr(args, k) for k in VESICLE_OPTIONS if k in given}
+        chosen = {k: getattr(args, k) for k in vesicle_options() if k in given}
         if args.scene == "vesicle":
             from .scenes import vesicle_scene
 

@@ -16,7 +16,6 @@ and the pictures are computed once, from the fields in memory.
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 import warnings
@@ -28,7 +27,7 @@ from .backend import Backend, backend_class, make_backend
 from .config import RunConfig
 from .initial import FieldIC, check_grid_field
 from .loop import AdaptiveDt, LoopState, RunResult, run_loop
-from .model import HISTORY_COLUMNS, ModelError
+from .model import HISTORY_COLUMNS, ModelError, is_real
 from .output import (
     HistoryWriter,
     check_history,
@@ -155,7 +154,7 @@ def simulate(
         raise TypeError(f"monitor must be callable (backend, row), got "
                         f"{type(monitor).__name__}")
     if config is None:
-        if not _real(perturb):  # None included: perturb has no "not given"
+        if not is_real(perturb):  # None included: perturb has no "not given"
             raise ModelError(f"perturb must be a number >= 0, got {perturb!r}")
         config = RunConfig.build(
             scene, backend=backend, n=n, dt=dt, steps=steps, until_steady=until_steady,
@@ -217,12 +216,6 @@ def _run_keywords_given(values: dict) -> list[str]:
     defaults = {k: p.default for k, p in inspect.signature(simulate).parameters.items()}
     return [k for k in _RUN_KEYWORDS if values[k] is not defaults[k]
             and values[k] != defaults[k]]
-
-
-def _real(value) -> bool:
-    """A real, finite number (not a bool)."""
-    return (isinstance(value, (int, float, np.integer, np.floating))
-            and not isinstance(value, bool) and math.isfinite(float(value)))
 
 
 def scene_as_run(scene: Scene, config: RunConfig) -> Scene:
@@ -355,7 +348,7 @@ def _check_resumable(out: Path, steps: int | None):
     if not (isinstance(ls.k, int) and ls.k >= 0):
         raise ModelError(f"cannot resume {out}: the checkpoint's step is {ls.k!r}, not an "
                          "integer >= 0")
-    if not (_real(ls.t) and ls.t >= 0 and _real(ls.dt) and ls.dt > 0):
+    if not (is_real(ls.t) and ls.t >= 0 and is_real(ls.dt) and ls.dt > 0):
         raise ModelError(f"cannot resume {out}: the checkpoint's time or time step is not "
                          f"usable (t = {ls.t!r}, dt = {ls.dt!r})")
     if config.total_steps < ls.k:
