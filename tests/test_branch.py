@@ -212,3 +212,39 @@ def test_a_vesicle_branch_fits_the_box_at_both_ends():
     assert get_parameter(both.params, "v") == pytest.approx(0.95)
     given = vesicle_for_branch({"branch": "prolate", "eps": 0.05, "R0": 0.2}, "v", 0.95, 0.7)
     assert R0(given) == pytest.approx(0.2)
+
+
+def test_the_predictor_is_the_quadratic_through_the_last_three_points():
+    """On a curved branch (a circle's arc in the (φ, p) plane of two fields, radius 1 in
+    the continuation's metric) the prediction Δs past the last of three points Δs apart is
+    the quadratic's: O(Δs³) off the arc, where the secant's is O(Δs²) off (the pear at
+    ε = 0.01 needed 5-8 Newton iterations a point from it against 6-12, and got past its fold);
+    its tangent is the arc's to O(Δs²). From two points: the secant."""
+    from fem_ade.branch import Continuation
+
+    scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05, R0=0.2)
+    be = make_backend("fem", scene, n=12, geometry="axisymmetric", scheme="stabilized",
+                      constraints="exact")
+    cont = Continuation(be, "v")
+    rng = np.random.default_rng(3)
+    u = rng.standard_normal(be.phi.size)
+    u /= np.sqrt(cont.inner(u, u))  # ⟨u, u⟩ = 1, θ = 1: the arc is (cos s) u + p = sin s
+
+    def arc(s):
+        return be.phi + (np.cos(s) - 1.0) * u, np.sin(s)
+
+    ds = 0.05
+    points = [arc(-2 * ds), arc(-ds), arc(0.0)]
+    (phi, p), (t_phi, t_p) = cont.predict(points, ds)
+    true_phi, true_p = arc(ds)
+    quadratic = cont.chord((phi, p), (true_phi, true_p))
+    (phi2, p2), (s_phi, s_p) = cont.predict(points[1:], ds)
+    secant = cont.chord((phi2, p2), (true_phi, true_p))
+    assert secant == pytest.approx(ds * ds, rel=0.1)  # measured: 2.5e-3
+    assert quadratic < 2 * ds**3 < secant / 5, (quadratic, secant)  # measured: 1.3e-4
+    assert abs(t_p - 1.0) < ds**2 and np.sqrt(cont.inner(t_phi, t_phi)) < ds**2  # 3e-5
+    assert cont.theta * cont.inner(t_phi, t_phi) + t_p**2 == pytest.approx(1.0)
+    h = cont.chord(points[1], points[2])  # the secant: along the last chord
+    assert np.allclose(s_phi, (points[2][0] - points[1][0]) / h)
+    assert np.allclose(phi2, points[2][0] + ds * s_phi) and p2 == pytest.approx(
+        points[2][1] + ds * s_p)
