@@ -293,10 +293,19 @@ def stability(be, k: int = EIGENVALUES) -> np.ndarray:
     (module docstring), ascending: ARPACK (``eigsh``, regular mode with P⁻¹ the step's exact
     solve) on the projected operator ΠᵀH_LΠ + σ_c·C(CᵀP⁻¹C)⁻¹Cᵀ, where Π = I − P⁻¹C(CᵀP⁻¹C)⁻¹Cᵀ
     is the P-orthogonal projector onto the constraints' tangent space and the second term
-    moves the two directions off it to λ = σ_c, far above the shape modes. Against a dense
+    moves the directions off it to λ = σ_c, far above the shape modes. Against a dense
     solve of the same problem (ε = 0.03, 3577 unknowns, three points across a fold): equal to
     7 digits, 113–126 products, 0.1 s each; LOBPCG (the method before) missed the negative
-    eigenvalue past that fold and a near-double one before it."""
+    eigenvalue past that fold and a near-double one before it.
+
+    C = (∇V, ∇A, P t) with t = ∂φ/∂z in the axisymmetric geometry (:func:`translation`): a
+    shape's translation along the axis is a zero mode of the continuous problem, which the
+    mesh pins with a small energy of either sign. Counted (with Newton's pin ∇T in its
+    place, which a slight tilt of the bulk φ satisfies), it made isolated points of the
+    prolate at ε = 0.01, v 0.95 → 0.6 "unstable" (v = 0.668, 0.624, 0.609: lowest −1.9e-6 …
+    −2.7e-4 between neighbours at +1.6e-5 … +1.4e-4; its eigenvector 0.83 along the
+    translation); without it the lowest is the next shape mode, smooth along the branch
+    (1.05e-4 … 1.76e-4 there, measured)."""
     from scipy.sparse.linalg import LinearOperator, eigsh
 
     from .fem.newton import NewtonSystem, linearize
@@ -307,8 +316,16 @@ def stability(be, k: int = EIGENVALUES) -> np.ndarray:
     p = be.params
     a, c, ke = 4.0 * p.kappa / p.eps**3, 4.0 * p.kappa / p.eps, p.kappa * p.eps
     w, K = be.space.weights, be.space.K
-    C = np.column_stack(lin.C)
-    Y = np.column_stack([sys_.P_inverse(cj) for cj in lin.C])
+
+    def P(x):
+        Kx = K @ np.ravel(x)
+        return a * w * np.ravel(x) + c * Kx + ke * (K @ (Kx / w))
+
+    Cs = list(lin.C[:2])
+    if getattr(be, "geometry", "cartesian") == "axisymmetric":
+        Cs.append(P(translation(be)))
+    C = np.column_stack(Cs)
+    Y = np.column_stack([sys_.P_inverse(cj) for cj in Cs])
     G = np.linalg.inv(C.T @ Y)
 
     def tangent(x):  # Π x
@@ -321,15 +338,22 @@ def stability(be, k: int = EIGENVALUES) -> np.ndarray:
              + step.constraint_hessian_vector(lin.phi, lin.Kphi, y, lin.lam[0], lin.lam[1]))
         return h - C @ (G @ (Y.T @ h)) + OFF_TANGENT * (C @ (G @ (C.T @ x)))
 
-    def P(x):
-        Kx = K @ np.ravel(x)
-        return a * w * np.ravel(x) + c * Kx + ke * (K @ (Kx / w))
-
     ops = [LinearOperator((N, N), matvec=f, dtype=float)
            for f in (H, P, lambda x: sys_.P_inverse(np.ravel(x)))]
     vals = eigsh(ops[0], k=k, M=ops[1], Minv=ops[2], which="SA", tol=1e-9,
                  return_eigenvectors=False, v0=np.ones(N))
     return np.sort(vals)
+
+
+def translation(be) -> np.ndarray:
+    """t = ∂φ/∂z at the nodes of an axisymmetric backend's state: the mode of a translation
+    along the axis (the spectral elements' derivative, the mean of two cells' at a shared
+    node)."""
+    from .fem.tensor import along
+
+    space = be.space
+    assert not space.axes[1].radial  # (r, z): the second axis is the axis' direction
+    return along(space.axes[1].derivative, be.phi.reshape(space.shape), 1).ravel()
 
 
 # ---------------------------------------------------------------------------------------------

@@ -182,6 +182,24 @@ class BoundedAxis:
         return p * np.arange(self.cells)[:, None] + np.arange(p + 1)[None, :]
 
     @functools.cached_property
+    def derivative(self) -> sp.csr_matrix:
+        """d/dx at the nodes of the piecewise polynomial of nodal values: each cell's
+        derivative (GLL, or GLJ in the radial axis' first cell), the mean of the two cells'
+        at a shared node; csr, N × N (exact for polynomials of degree ≤ p)."""
+        dofs = self.element_dofs
+        rows, cols, vals = [], [], []
+        for e in range(self.cells):
+            D = gll.derivative_matrix_at(self.cell_xi(e)) * (2.0 / self.h[e])
+            i, j = np.meshgrid(dofs[e], dofs[e], indexing="ij")
+            rows.append(i.ravel())
+            cols.append(j.ravel())
+            vals.append(D.ravel())
+        A = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(self.size, self.size))
+        shared = np.bincount(dofs.ravel(), minlength=self.size)  # 1, or 2 between cells
+        return sp.diags(1.0 / shared) @ A
+
+    @functools.cached_property
     def stiffness(self) -> sp.csr_matrix:
         """K₁ = Σ_e ∫ ℓ′ᵢ ℓ′ⱼ (the axis' measure), exact (class docstring); csr, N × N."""
         p, dofs = self.order, self.element_dofs
