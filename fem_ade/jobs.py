@@ -36,11 +36,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from .lock import FolderBusy
 from .model import ModelError
 from .status import ENDED, Status
 
-#: the errors that are a run's failure (recorded with their reason), not a bug of the caller
-RUN_ERRORS = (ModelError, ValueError, FloatingPointError, ArithmeticError)
+#: the errors that are a run's failure (recorded with their reason), not a bug of the caller:
+#: ModelError (a ValueError), FloatingPointError and Newton's NewtonError (ArithmeticErrors)
+RUN_ERRORS = (ValueError, ArithmeticError)
 #: how often a waiting job looks at a busy folder again (seconds)
 WAIT_POLL_S = 2.0
 
@@ -75,6 +77,15 @@ def failure_record(folder: str | Path) -> Path:
     return folder.with_name(folder.name + ".failed.json")
 
 
+def record_failure(folder: str | Path, reason: str, seconds: float | None = None) -> None:
+    """Write the reason a job failed to its :func:`failure_record`."""
+    folder = Path(folder)
+    record = {"folder": folder.name, "reason": reason}
+    if seconds is not None:
+        record["seconds"] = round(seconds, 2)
+    _write_json(failure_record(folder), record)
+
+
 def read_summary(folder: str | Path) -> dict | None:
     """The folder's summary.json as a dict, or None (none yet, unreadable, not a table)."""
     try:
@@ -101,8 +112,6 @@ def ensure(folder: str | Path, scene=None, *, options: dict | Callable | None = 
     again); ``after``: start from the end of that run (simulate's ``phi0``). ``scene`` may
     be a function that makes the scene and ``options`` one of the scene that makes them:
     they are called only when a run starts, and their errors are the job's failure."""
-    from .lock import FolderBusy
-
     folder = Path(folder)
     if (scene is None) == (make is None):
         raise TypeError("ensure() needs a scene (with its options) or a make function")
@@ -127,8 +136,7 @@ def ensure(folder: str | Path, scene=None, *, options: dict | Callable | None = 
         except RUN_ERRORS as err:
             reason = f"{type(err).__name__}: {err}"
             seconds = time.perf_counter() - t0
-            _write_json(failed, {"folder": folder.name, "reason": reason,
-                                 "seconds": round(seconds, 2)})
+            record_failure(folder, reason, seconds)
             return Outcome(folder, Status.FAILED, read_summary(folder), reason, seconds,
                            ran=True)
         summary = read_summary(folder)
@@ -146,8 +154,6 @@ def _run(folder: Path, scene, options: dict, make, after, quiet: bool, restart: 
         try:
             return resume(folder, quiet=quiet)
         except ModelError as err:
-            from .lock import FolderBusy
-
             if isinstance(err, FolderBusy) or not restart:
                 raise
             if not quiet:

@@ -67,7 +67,7 @@ import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from .jobs import failure_record
+from .jobs import failure_record, record_failure
 from .model import ModelError
 from .status import ENDED, Status
 
@@ -693,8 +693,7 @@ def _drive(client, todo, out, rows, axes, quiet, retry_s, as_completed):
                 r = fut.result()
             except Exception as err:  # noqa: BLE001 - a worker lost, an unexpected error
                 name = fut.key.removeprefix("point-")
-                _write_json(failure_record(out / "points" / name),
-                            {"point": name, "reason": f"{type(err).__name__}: {err}"})
+                record_failure(out / "points" / name, f"{type(err).__name__}: {err}")
                 r = row(by_name[name], out)
             if r["status"] == Status.BUSY:  # another process runs it: ask again later
                 time.sleep(retry_s)

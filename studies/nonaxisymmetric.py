@@ -22,8 +22,8 @@ the two where that sweep ended in non-axisymmetric shapes (starfish-3 at v = 0.7
 at 1.64 its neck is closed at ε = 0.01).
 
 Writes ``OUT/nonaxisymmetric.md`` and ``.json``; the 3D run folders in
-``OUT/nonaxisymmetric/[eps=EPS/]`` (their summary.json and run.json committed; a finished run
-is read back, a stopped one resumed from its checkpoint).
+``OUT/nonaxisymmetric/[eps=EPS/]`` (their summary.json committed; a finished run is read
+back, a stopped one resumed from its checkpoint).
 
     python studies/nonaxisymmetric.py --out studies/results --eps 0.02   # ~20 min (64³)
     python studies/nonaxisymmetric.py --quick                            # ε = 0.04

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..backend import BackendBase, check_choice
-from ..model import ModelError
+from ..model import ModelError, is_int
 from ..registry import FEM_ORDERS, FEM_SOLVERS, LINALGS
 from ..scenes import Scene
 from . import mesh as fmesh
@@ -140,9 +140,7 @@ class FEMBackend(BackendBase):
         """Cells per axis from ``nodes`` per axis: nodes/p on a tensor mesh, where p must
         divide them and leave :meth:`min_cells`; a mesh file's n is not used (the file
         sets the resolution), so it is returned as it is."""
-        counts = (isinstance(nodes, (int, np.integer)) and not isinstance(nodes, bool)
-                  and isinstance(order, (int, np.integer)) and not isinstance(order, bool)
-                  and order >= 1)
+        counts = is_int(nodes, 1) and is_int(order, 1)
         tensor = fmesh.parse_option(mesh)[0] in ("uniform", "graded") if counts else False
         if not tensor:
             return nodes
