@@ -165,32 +165,21 @@ def machine() -> dict:
             "date": time.strftime("%Y-%m-%d %H:%M"), "versions": package_versions()}
 
 
-def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--quick", action="store_true", help="small grids (the test suite)")
-    ap.add_argument("--repeats", type=int, default=None)
-    ap.add_argument("--out", default=str(OUT))
-    args = ap.parse_args(argv)
-    from fem_ade.scenes import get_scene
-
-    quick = args.quick
-    repeats = args.repeats or (2 if quick else 9)
-    scene = get_scene(SCENE)
-    nodes = 16 if quick else 64
-    orders = (1, 2, 4) if quick else ORDERS
-    F = Figures()
-    info = machine()
-    print(f"bench: {info['cpu']} ({info['cores']} cores), BLAS threads {info['blas_threads']},"
-          f" FFT workers {info['fft_workers']}, {info['date']}")
-    t_start = time.perf_counter()
-
+def spectral_steps(F: Figures, scene, nodes: int, repeats: int) -> dict:
+    """Section 1: the spectral step of each scheme; returns its timings by scheme."""
     print(f"\n1. the spectral step at {nodes}^3")
     spectral = {}
     for scheme in ("paper", "stabilized"):
         be, _, _ = build("spectral", scene, nodes, scheme)
         spectral[scheme] = t = time_steps(be, repeats)
         F.add(f"spectral step {nodes}^3 {scheme} cpu", 1e3 * t["cpu"], "ms")
+    return spectral
 
+
+def fem_steps(F: Figures, scene, nodes: int, orders, repeats: int, quick: bool,
+              spectral: dict) -> None:
+    """Section 2: the FEM step of each order on both meshes, ÷ the spectral step, and the
+    graded ÷ uniform ratio from interleaved steps."""
     print(f"\n2. the FEM step at {nodes}^3 nodes, each order (n = {nodes}/p cells), ÷ the "
           "spectral step (CPU)")
     for p in orders:
@@ -212,6 +201,10 @@ def main(argv=None) -> dict:
         uniform, graded = time_interleaved(pair, 2 * repeats)
         F.add(f"FEM p={p} graded / uniform step (paper, interleaved)",
               graded["cpu"] / uniform["cpu"], "x", 1.2 if p >= 4 and not quick else None)
+
+
+def exact_constraint_steps(F: Figures, scene, nodes: int, repeats: int, quick: bool) -> None:
+    """End of section 2: the steady recipe's step (exact constraints), spectral and FEM p=4."""
     print("\n   the steady recipe's step (stabilized + exact constraints: four right sides)")
     for backend, options in (("spectral", {}), ("fem", {"order": 4})):
         n = nodes // options.get("order", 1)
@@ -225,6 +218,10 @@ def main(argv=None) -> dict:
             F.add("FEM p=4 exact-constraint step / spectral's", t["cpu"] / base, "x",
                   3.0 if not quick else None)
 
+
+def amg_steps(F: Figures, scene, nodes: int, repeats: int, quick: bool,
+              spectral: dict) -> None:
+    """Section 3: PCG + AMG on the low-order refined operator: its step and iterations."""
     print(f"\n3. PCG + AMG on the low-order refined operator, {nodes}^3 nodes")
     amg_orders = (1, 4) if quick else (1, 2, 4, 8)
     for p in amg_orders:
@@ -238,6 +235,9 @@ def main(argv=None) -> dict:
             if scheme == "paper":
                 F.add(f"FEM p={p} amg set-up wall", setup, "s")
 
+
+def ade_share(F: Figures, scene, nodes: int, repeats: int) -> None:
+    """Section 4: the step with the ADE term ÷ the step without it."""
     print("\n4. effects: ADE off")
     no_ade = scene.with_(effects=scene.params.effects - {"ade"})
     for backend, options in (("spectral", {}), ("fem", {"order": 4})):
@@ -250,6 +250,9 @@ def main(argv=None) -> dict:
         # the rest gets faster (the off terms' not being evaluated is tests' business)
         F.add(f"{name} {nodes}^3 step with ADE / without (cpu)", t_on / t_off, "x")
 
+
+def memory(F: Figures, nodes: int, quick: bool) -> None:
+    """Section 5: the peak memory of fresh processes (at 128³ too unless quick)."""
     print("\n5. memory (a fresh process: build, two steps)")
     F.add(f"peak RSS, FEM p=4 {nodes}^3 nodes, fdm", peak_rss_mb(nodes, 4, "auto"), "MB")
     if not quick:
@@ -258,31 +261,32 @@ def main(argv=None) -> dict:
             F.add(f"peak RSS, FEM p={p} 128^3 nodes, {solver}", peak_rss_mb(128, p, solver),
                   "MB", target)
 
-    if not quick:
-        print("\n6. time to a steady state (discocyte, 64^3 nodes: stabilized 100x dt, exact "
-              "constraints, momentum, until 1e-9)")
-        cases = [("spectral", 64, {}), ("fem", 64, {"order": 4}), ("fem", 64, {"order": 1})]
-        ends = {}
-        for backend, n, options in cases:
-            r = time_to_steady(backend, scene, n, 1e-9, **options)
-            name = backend + (f" p={options['order']}" if options else "")
-            ends[name] = r
-            F.add(f"time to steady state 64^3, {name} (cpu)", r["cpu"], "s")
-            F.add(f"  steps to steady state 64^3, {name}", float(r["steps"]), "steps")
-            print(f"    ends: {r['status']}, E = {r['E']:.10g}, {r['label']}, v = {r['v']:.4f}")
-        ref = ends["spectral"]["E"]
-        for name in ("fem p=4", "fem p=1"):
-            F.add(f"|E {name} / E spectral - 1| at the steady state",
-                  abs(ends[name]["E"] / ref - 1), "")
-        F.add("time to steady state, fem p=4 / spectral (cpu)",
-              ends["fem p=4"]["cpu"] / ends["spectral"]["cpu"], "x")
 
-    total = time.perf_counter() - t_start
-    print(f"\nfull run: {total:.0f} s; targets not met: {F.missed() or 'none'}")
-    out = Path(args.out)
+def steady_states(F: Figures, scene) -> None:
+    """Section 6: the time to a steady state at 64³, spectral and FEM p = 4 and 1, and how
+    far their energies end apart."""
+    print("\n6. time to a steady state (discocyte, 64^3 nodes: stabilized 100x dt, exact "
+          "constraints, momentum, until 1e-9)")
+    cases = [("spectral", 64, {}), ("fem", 64, {"order": 4}), ("fem", 64, {"order": 1})]
+    ends = {}
+    for backend, n, options in cases:
+        r = time_to_steady(backend, scene, n, 1e-9, **options)
+        name = backend + (f" p={options['order']}" if options else "")
+        ends[name] = r
+        F.add(f"time to steady state 64^3, {name} (cpu)", r["cpu"], "s")
+        F.add(f"  steps to steady state 64^3, {name}", float(r["steps"]), "steps")
+        print(f"    ends: {r['status']}, E = {r['E']:.10g}, {r['label']}, v = {r['v']:.4f}")
+    ref = ends["spectral"]["E"]
+    for name in ("fem p=4", "fem p=1"):
+        F.add(f"|E {name} / E spectral - 1| at the steady state",
+              abs(ends[name]["E"] / ref - 1), "")
+    F.add("time to steady state, fem p=4 / spectral (cpu)",
+          ends["fem p=4"]["cpu"] / ends["spectral"]["cpu"], "x")
+
+
+def write_figures(out: Path, name: str, data: dict) -> None:
+    """Write ``data`` to ``out/name``, keeping the axisymmetric block already there."""
     out.mkdir(parents=True, exist_ok=True)
-    name = "bench_quick.json" if quick else "bench.json"
-    data = {"machine": info, "run_s": total, "figures": F.items}
     try:  # the axisymmetric cost figures (studies/axisymmetric.py) are that study's: kept
         kept = json.loads((out / name).read_text()).get("axisymmetric")
     except (OSError, ValueError):
@@ -290,6 +294,42 @@ def main(argv=None) -> dict:
     if kept is not None:
         data["axisymmetric"] = kept
     (out / name).write_text(json.dumps(data, indent=1) + "\n")
+
+
+def main(argv=None) -> dict:
+    """Run every section, print the figures, write bench.json (bench_quick.json if quick);
+    returns the figures, the targets missed and the machine."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="small grids (the test suite)")
+    ap.add_argument("--repeats", type=int, default=None)
+    ap.add_argument("--out", default=str(OUT))
+    args = ap.parse_args(argv)
+    from fem_ade.scenes import get_scene
+
+    quick = args.quick
+    repeats = args.repeats or (2 if quick else 9)
+    scene = get_scene(SCENE)
+    nodes = 16 if quick else 64
+    orders = (1, 2, 4) if quick else ORDERS
+    F = Figures()
+    info = machine()
+    print(f"bench: {info['cpu']} ({info['cores']} cores), BLAS threads {info['blas_threads']},"
+          f" FFT workers {info['fft_workers']}, {info['date']}")
+    t_start = time.perf_counter()
+
+    spectral = spectral_steps(F, scene, nodes, repeats)
+    fem_steps(F, scene, nodes, orders, repeats, quick, spectral)
+    exact_constraint_steps(F, scene, nodes, repeats, quick)
+    amg_steps(F, scene, nodes, repeats, quick, spectral)
+    ade_share(F, scene, nodes, repeats)
+    memory(F, nodes, quick)
+    if not quick:
+        steady_states(F, scene)
+
+    total = time.perf_counter() - t_start
+    print(f"\nfull run: {total:.0f} s; targets not met: {F.missed() or 'none'}")
+    name = "bench_quick.json" if quick else "bench.json"
+    write_figures(Path(args.out), name, {"machine": info, "run_s": total, "figures": F.items})
     return {"figures": F.items, "missed": F.missed(), "machine": info}
 
 

@@ -201,7 +201,6 @@ def test_one_definition_of_the_run_status():
 #: shrink, and none of them grow
 LONG = 60
 LONG_FUNCTIONS = {
-    "studies/bench.py:main": (126, "debt: one benchmark section after another"),
     "fem_ade/branch.py:follow": (122, "debt: the continuation loop with its step control"),
     "fem_ade/run.py:_main": (103, "debt: the command line's dispatch"),
     "studies/constraints_study.py:main": (100, "debt: options, then three modes"),
