@@ -21,7 +21,9 @@ the largest) and the report marks it with †.
 
 Each case then runs with ``until_steady=1e-6`` (relative change of E_M per step, averaged
 over a record interval) and a cap ``max_steps`` chosen from the step cost measured in the
-trial so that one run takes about ``--budget`` seconds at most. Results go to
+trial so that one run takes about ``--budget`` seconds at most (the trial's outcome waits in
+the case's trial.json until case.json holds it, so that a case interrupted after its trial
+does not repeat it). Results go to
 ``OUT/constraints/<scene>-<variant>/`` (history.csv, summary.json, shape.png, history.png);
 the far-field (bulk) value of φ and the volume it carries are measured from the final φ
 (:func:`bulk_offset`) and stored in case.json; final.npz and run.json are deleted if larger
@@ -295,7 +297,9 @@ def run_case(
     quiet: bool,
     subdir: str = "constraints",
 ) -> dict:
-    from fem_ade.jobs import ensure, status_of
+    """One case: its Δt trial, then its run (skipped when the case has finished); returns
+    its case.json."""
+    from fem_ade.jobs import status_of
     from fem_ade.status import ENDED
 
     out = out_root / subdir / f"{name}-{variant}"
@@ -304,56 +308,108 @@ def run_case(
     n, extra = SCENES[name]
     if quick:
         n = 16
-    allow = quick
-    dt, log = find_dt(name, variant, n, extra, trial_steps=trial_steps, every=every, allow=allow)
-    case = {
-        "scene": name,
-        "variant": variant,
-        "n": n,
-        "extra": extra,
-        "trials": log,
-        "trial_steps": trial_steps,
-        "every": every,
-        "tol": tol,
-        "dt_passed": True,
-    }
-    if not math.isfinite(dt):
-        dt = fallback_dt(log)
-        case["dt_passed"] = False
+    case, dt = trial_stage(name, variant, out, n, extra, trial_steps=trial_steps, every=every,
+                           tol=tol, allow=quick)
     if not math.isfinite(dt):
         case.update(status="no stable dt", dt=math.nan)
         out.mkdir(parents=True, exist_ok=True)
         (out / "case.json").write_text(json.dumps(case, indent=1, default=str))
         return case
+    return run_stage(case, dt, out, quick=quick, budget=budget, quiet=quiet)
+
+
+def trial_stage(name: str, variant: str, out: Path, n: int, extra: dict, *, trial_steps: int,
+                every: int, tol: float, allow: bool) -> tuple[dict, float]:
+    """The case's record so far (its settings and Δt trials) and the Δt to run at (NaN: no
+    trial ran): the trial kept in ``out/trial.json`` if one was made for these settings
+    before the run started (so that a run that has ended, or is resumed, is not preceded by
+    a new trial), else a new one."""
+    case = {
+        "scene": name,
+        "variant": variant,
+        "n": n,
+        "extra": extra,
+        "trials": None,
+        "trial_steps": trial_steps,
+        "every": every,
+        "tol": tol,
+        "dt_passed": True,
+    }
+    kept = _kept_trial(out, case)
+    if kept is not None:
+        return kept
+    dt, log = find_dt(name, variant, n, extra, trial_steps=trial_steps, every=every, allow=allow)
+    case["trials"] = log
+    if not math.isfinite(dt):
+        dt = fallback_dt(log)
+        case["dt_passed"] = False
+    return case, dt
+
+
+def _kept_trial(out: Path, case: dict) -> tuple[dict, float] | None:
+    """The record and Δt in ``out/trial.json`` if its settings are ``case``'s, else None."""
+    try:
+        kept = json.loads((out / "trial.json").read_text())
+        old, dt = kept["case"], float(kept["dt"])
+    except (OSError, ValueError, TypeError, KeyError):
+        return None
+    same = isinstance(old, dict) and all(
+        old.get(k) == v for k, v in case.items() if k not in ("trials", "dt_passed"))
+    return (old, dt) if same else None
+
+
+def run_stage(case: dict, dt: float, out: Path, *, quick: bool, budget: float,
+              quiet: bool) -> dict:
+    """Run the case at ``dt`` into ``out`` (or find its run there), measure the bulk offset,
+    drop large files and write case.json; returns the case."""
+    from fem_ade.jobs import ensure
+
+    name, variant, n, every = case["scene"], case["variant"], case["n"], case["every"]
     scene = scene_for(name, variant)
-    ms = [e["ms_per_step"] for e in log if e["dt"] == dt][0]
+    ms = [e["ms_per_step"] for e in case["trials"] if e["dt"] == dt][0]
     if quick:
         run_kw = {"steps": 20}
     else:
         cap = int(budget / (1.3 * ms * 1e-3)) // every * every
-        run_kw = {"until_steady": tol, "max_steps": max(cap, every)}
+        run_kw = {"until_steady": case["tol"], "max_steps": max(cap, every)}
     if not quiet:
         print(
             f"  {name}-{variant}: dt = {dt:.3g} ({dt / scene.dt:g}x paper), "
             f"{ms:.2f} ms/step in trial, {run_kw}",
             flush=True,
         )
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "trial.json").write_text(json.dumps({"case": case, "dt": dt}, default=str))
     done = ensure(out, scene, options=dict(dt=dt, every=10 if quick else every, **run_kw,
-                                           **common_kwargs(name, variant, n, extra, allow)),
+                                           **common_kwargs(name, variant, n, case["extra"],
+                                                           quick)),
                   restart=True).check()
-    r, history = done.summary, run_history(out)
-    p = scene.params
-    bulk = None
-    if (out / "final.npz").is_file():
-        import numpy as np
-
-        with np.load(out / "final.npz") as z:
-            bulk = bulk_offset(np.array(z["phi"]), p.L, p.eps, p.alpha, p.beta)
+    bulk = _final_bulk(out, scene.params)
     for f in ("final.npz", "run.json"):
         fp = out / f
         if fp.is_file() and fp.stat().st_size > BIG:
             fp.unlink()
-    case.update(
+    case.update(_run_record(done.summary, run_history(out), scene, dt, run_kw), bulk=bulk)
+    (out / "case.json").write_text(json.dumps(case, indent=1, default=str))
+    (out / "trial.json").unlink()  # case.json has it now
+    return case
+
+
+def _final_bulk(out: Path, p) -> dict | None:
+    """:func:`bulk_offset` of the run's final φ (None without final.npz)."""
+    if not (out / "final.npz").is_file():
+        return None
+    import numpy as np
+
+    with np.load(out / "final.npz") as z:
+        return bulk_offset(np.array(z["phi"]), p.L, p.eps, p.alpha, p.beta)
+
+
+def _run_record(r: dict, history: list[dict], scene, dt: float, run_kw: dict) -> dict:
+    """What case.json keeps of a run: its Δt, outcome, final state, targets and energy
+    record (in case.json's order, the bulk offset after it)."""
+    p = scene.params
+    return dict(
         dt=dt,
         dt_factor=dt / scene.dt,
         paper_dt=scene.dt,
@@ -375,10 +431,7 @@ def run_case(
         E0=float(history[0]["E"]),
         E_end=float(history[-1]["E"]),
         last_rate=_last_rate(history),
-        bulk=bulk,
     )
-    (out / "case.json").write_text(json.dumps(case, indent=1, default=str))
-    return case
 
 
 CHECK_RUNS = (  # label, variant, Δt factor
@@ -406,78 +459,89 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
     """
     import numpy as np
 
-    from fem_ade.jobs import ensure, status_of
-    from fem_ade.runs import simulate
-    from fem_ade.shape import describe
+    from fem_ade.jobs import status_of
     from fem_ade.status import ENDED
 
     src = out_root / "constraints" / "long" / "discocyte-exact" / "final.npz"
     with np.load(src) as z:
         phi0 = np.array(z["phi"])
-    n = phi0.shape[0]
     rep_path = out_root / "constraints" / "check" / "continuation.json"
     old = json.loads(rep_path.read_text())["runs"] if rep_path.is_file() else {}
     report = {"source": str(src), "runs": {}}
     for label, variant, factor in CHECK_RUNS:
-        if labels and label not in labels:
+        out = out_root / "constraints" / "check" / label
+        wanted = not labels or label in labels
+        if not wanted or (label in old and status_of(out) in ENDED):  # its row is kept
             if label in old:
                 report["runs"][label] = old[label]
             continue
-        out = out_root / "constraints" / "check" / label
-        if label in old and status_of(out) in ENDED:  # finished before: its row is kept
-            report["runs"][label] = old[label]
-            continue
-        scene = scene_for("discocyte", variant)
-        cons = "exact" if variant == "exact" else "penalty"
-        dt = factor * scene.dt
-        kw = dict(backend="spectral", n=n, dt=dt, scheme="stabilized", constraints=cons,
-                  phi0=phi0, quiet=True)
-        probe = simulate(scene, steps=20, every=20, **kw)  # the step cost sets the length
-        steps = max(int(budget / (1.3 * probe.wall_s / 20)) // 500 * 500, 500)
-        r = ensure(out, scene, options=dict(kw, steps=steps, every=500),
-                   restart=True).check().summary
-        history = run_history(out)
-        d0 = history[0]
-        with np.load(out / "final.npz") as z:
-            phi1 = np.array(z["phi"])
-        sh0 = describe(phi0, scene.params.L)
-        sh1 = describe(phi1, scene.params.L)
-        pp = scene.params
-        bulk0 = bulk_offset(phi0, pp.L, pp.eps, pp.alpha, pp.beta)
-        bulk1 = bulk_offset(phi1, pp.L, pp.eps, pp.alpha, pp.beta)
-        keys = ("components", "genus", "reduced_volume", "reduced_area_difference")
-        report["runs"][label] = {
-            "dt": dt,
-            "steps": r["steps"],
-            "status": r["status"],
-            "wall_s": r["wall_s"],
-            "start": {
-                **{k: d0[k] for k in ("E", "W", "G", "V", "A", "dA")},
-                **{k: sh0[k] for k in keys},
-                "sharp": sh0["sharp"],
-                "bulk": bulk0,
-            },
-            "end": {
-                **{k: r["final"][k] for k in ("E", "W", "G", "V", "A", "dA")},
-                **{k: sh1[k] for k in keys},
-                "sharp": sh1["sharp"],
-                "bulk": bulk1,
-            },
-            "history": [{k: h[k] for k in ("step", "E", "W", "G", "V", "A")} for h in history],
-            "rises": energy_rises(history),
-        }
-        from fem_ade.output import series_files
-
-        for f in ("final.npz", "run.json", "initial.npz", "history.png"):
-            (out / f).unlink(missing_ok=True)  # the tables cite shape.png only
-        for f in series_files(out):
-            f.unlink()
-        _compress(out / "shape.png")
+        report["runs"][label] = continue_from(phi0, out, variant, factor, budget=budget)
+        _tidy_check_folder(out)
         if not quiet:
             print(label, json.dumps(report["runs"][label]["end"]), flush=True)
     rep_path.parent.mkdir(parents=True, exist_ok=True)
     rep_path.write_text(json.dumps(report, separators=(",", ":"), default=str))
     return report
+
+
+def continue_from(phi0, out: Path, variant: str, factor: float, *, budget: float) -> dict:
+    """Continue ``phi0`` into ``out`` with ``variant``'s constraints at ``factor`` × the
+    paper's Δt for about ``budget`` seconds (whole 500-step records); returns its row of
+    continuation.json: the run, its start and end states and its energy record."""
+    import numpy as np
+
+    from fem_ade.jobs import ensure
+    from fem_ade.runs import simulate
+
+    scene = scene_for("discocyte", variant)
+    cons = "exact" if variant == "exact" else "penalty"
+    dt = factor * scene.dt
+    kw = dict(backend="spectral", n=phi0.shape[0], dt=dt, scheme="stabilized",
+              constraints=cons, phi0=phi0, quiet=True)
+    probe = simulate(scene, steps=20, every=20, **kw)  # the step cost sets the length
+    steps = max(int(budget / (1.3 * probe.wall_s / 20)) // 500 * 500, 500)
+    r = ensure(out, scene, options=dict(kw, steps=steps, every=500),
+               restart=True).check().summary
+    history = run_history(out)
+    with np.load(out / "final.npz") as z:
+        phi1 = np.array(z["phi"])
+    return {
+        "dt": dt,
+        "steps": r["steps"],
+        "status": r["status"],
+        "wall_s": r["wall_s"],
+        "start": _check_state(history[0], phi0, scene.params),
+        "end": _check_state(r["final"], phi1, scene.params),
+        "history": [{k: h[k] for k in ("step", "E", "W", "G", "V", "A")} for h in history],
+        "rises": energy_rises(history),
+    }
+
+
+def _check_state(energies: dict, phi, p) -> dict:
+    """One end of a continuation: E, W, G, V, A, ΔA, the sharp shape's descriptors and the
+    bulk offset of ``phi``."""
+    from fem_ade.shape import describe
+
+    sh = describe(phi, p.L)
+    keys = ("components", "genus", "reduced_volume", "reduced_area_difference")
+    return {
+        **{k: energies[k] for k in ("E", "W", "G", "V", "A", "dA")},
+        **{k: sh[k] for k in keys},
+        "sharp": sh["sharp"],
+        "bulk": bulk_offset(phi, p.L, p.eps, p.alpha, p.beta),
+    }
+
+
+def _tidy_check_folder(out: Path) -> None:
+    """Keep of a continuation's folder what the tables cite: its summary, history and a
+    compressed shape.png."""
+    from fem_ade.output import series_files
+
+    for f in ("final.npz", "run.json", "initial.npz", "history.png"):
+        (out / f).unlink(missing_ok=True)  # the tables cite shape.png only
+    for f in series_files(out):
+        f.unlink()
+    _compress(out / "shape.png")
 
 
 def bulk_offset(
@@ -703,34 +767,73 @@ def _check_table(out_root: Path) -> list[str]:
 
 
 def write_report(out_root: Path, scenes, variants) -> Path:
+    """Write ``OUT/constraints.md`` from the cases' case.json files (and the notes); returns
+    its path."""
+    lines = [HEADER, ""]
+    for subdir, title in SETS:
+        if (out_root / subdir).is_dir():
+            lines += _results_section(out_root, subdir, title, scenes, variants)
+    lines += _trials_section(out_root, scenes, variants)
+    lines += _volume_budget_table(out_root, scenes, variants)
+    lines += _dt_trial_table(out_root)
+    lines += _check_table(out_root)
+    notes = out_root / "constraints" / "notes.md"
+    if notes.is_file():
+        lines += [notes.read_text().rstrip(), ""]
+    path = out_root / "constraints.md"
+    path.write_text("\n".join(lines))
+    return path
+
+
+def _results_section(out_root: Path, subdir: str, title: str, scenes, variants) -> list[str]:
+    """One result set's section: a table per scene, a row per variant."""
     from fem_ade.scenes import get_scene
 
-    lines = [HEADER, ""]
+    lines = [f"# Results with {title}", ""]
+    for name in scenes:
+        sc = get_scene(name)
+        p = sc.params
+        v0, m0 = _targets(p.alpha, p.beta, p.delta_A0, p.D)
+        lines += [
+            f"## {name} ({sc.figure}, ε = {p.eps:g}, paper Δt = {sc.dt:g}) — "
+            f"{title.split(' (')[0]}",
+            "",
+            f"Targets: α = {p.alpha:g}, β = {p.beta:g}, ΔA₀ = {p.delta_A0:g}; "
+            f"in reduced (diffuse) terms v₀ = {v0:.3f}, Δa₀ = {m0:.3f}.",
+            "",
+            TABLE_HEAD,
+        ]
+        for variant in variants:
+            c = _read_case(out_root, subdir, name, variant)
+            if c is None:
+                lines.append(f"| {variant} | – | – | – | not run |" + " |" * 17)
+            elif c["status"] == "no stable dt":
+                lines.append(f"| {variant} | no Δt ran | – | – | not run |" + " |" * 17)
+            else:
+                lines.append(_row(c, f"{subdir}/{name}-{variant}/shape.png"))
+        lines.append("")
+    return lines
+
+
+def _read_case(out_root: Path, subdir: str, name: str, variant: str) -> dict | None:
+    """A case's case.json (None if it has none)."""
+    cj = out_root / subdir / f"{name}-{variant}" / "case.json"
+    return json.loads(cj.read_text()) if cj.is_file() else None
+
+
+def _trials_section(out_root: Path, scenes, variants) -> list[str]:
+    """The Δt trials of the first result set, one row per case, and the compute of both
+    sets (production runs and trials)."""
     total_wall = total_trials = 0.0
     trial_lines, trial_desc = [], "?"
-    for subdir, title in SETS:
+    for subdir, _ in SETS:
         if not (out_root / subdir).is_dir():
             continue
-        lines += [f"# Results with {title}", ""]
         for name in scenes:
-            sc = get_scene(name)
-            p = sc.params
-            v0, m0 = _targets(p.alpha, p.beta, p.delta_A0, p.D)
-            lines += [
-                f"## {name} ({sc.figure}, ε = {p.eps:g}, paper Δt = {sc.dt:g}) — "
-                f"{title.split(' (')[0]}",
-                "",
-                f"Targets: α = {p.alpha:g}, β = {p.beta:g}, ΔA₀ = {p.delta_A0:g}; "
-                f"in reduced (diffuse) terms v₀ = {v0:.3f}, Δa₀ = {m0:.3f}.",
-                "",
-                TABLE_HEAD,
-            ]
             for variant in variants:
-                cj = out_root / subdir / f"{name}-{variant}" / "case.json"
-                if not cj.is_file():
-                    lines.append(f"| {variant} | – | – | – | not run |" + " |" * 17)
+                c = _read_case(out_root, subdir, name, variant)
+                if c is None:
                     continue
-                c = json.loads(cj.read_text())
                 total_trials += sum(
                     e["steps"] * e["ms_per_step"] * 1e-3
                     for e in c["trials"]
@@ -738,20 +841,10 @@ def write_report(out_root: Path, scenes, variants) -> Path:
                 )
                 if subdir == SETS[0][0]:
                     trial_desc = f"{c.get('trial_steps')} (a record every {c.get('every')})"
-                    trial_lines.append(
-                        f"| {name} | {variant} | "
-                        + "; ".join(f"{e['factor']}×: {_outcome(e)}" for e in c["trials"])
-                        + f" | {_f(c['dt'], '{:.3g}')}"
-                        + ("" if c.get("dt_passed", True) else " †")
-                        + " |"
-                    )
-                if c["status"] == "no stable dt":
-                    lines.append(f"| {variant} | no Δt ran | – | – | not run |" + " |" * 17)
-                    continue
-                total_wall += float(c.get("wall_s") or 0)
-                lines.append(_row(c, f"{subdir}/{name}-{variant}/shape.png"))
-            lines.append("")
-    lines += [
+                    trial_lines.append(_trial_line(name, variant, c))
+                if c["status"] != "no stable dt":
+                    total_wall += float(c.get("wall_s") or 0)
+    return [
         "# Δt trials",
         "",
         f"Trial: {trial_desc} steps, largest factor first; the first `ok` is used. "
@@ -767,19 +860,21 @@ def write_report(out_root: Path, scenes, variants) -> Path:
         "shared with another benchmark (`nice -n 10`).",
         "",
     ]
-    lines += _volume_budget_table(out_root, scenes, variants)
-    lines += _dt_trial_table(out_root)
-    lines += _check_table(out_root)
-    notes = out_root / "constraints" / "notes.md"
-    if notes.is_file():
-        lines += [notes.read_text().rstrip(), ""]
-    path = out_root / "constraints.md"
-    path.write_text("\n".join(lines))
-    return path
 
 
-def main(argv=None) -> list[dict]:
-    """Run the study (see the module docstring); return the cases run (their case.json)."""
+def _trial_line(name: str, variant: str, c: dict) -> str:
+    """A case's row of the Δt trials table: each factor's outcome and the Δt used."""
+    return (
+        f"| {name} | {variant} | "
+        + "; ".join(f"{e['factor']}×: {_outcome(e)}" for e in c["trials"])
+        + f" | {_f(c['dt'], '{:.3g}')}"
+        + ("" if c.get("dt_passed", True) else " †")
+        + " |"
+    )
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    """The command line's options (see the module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default="runs/studies",
                     help="results root (default %(default)s; the committed: studies/results)")
@@ -824,7 +919,12 @@ def main(argv=None) -> list[dict]:
         help="measure the bulk offset of every case with a final.npz, then delete every "
         "final.npz, run.json and checkpoint.npz under OUT/constraints",
     )
-    args = ap.parse_args(argv)
+    return ap.parse_args(argv)
+
+
+def main(argv=None) -> list[dict]:
+    """Run the study (see the module docstring); return the cases run (their case.json)."""
+    args = parse_args(argv)
     out_root = Path(args.out)
     scenes = args.scenes or (["discocyte"] if args.quick else list(SCENES))
     variants = args.variants or list(VARIANTS)
@@ -833,52 +933,72 @@ def main(argv=None) -> list[dict]:
         report = continuation_check(out_root, budget=args.budget, labels=args.check_runs)
         return list(report["runs"].values())
     if args.dt_trial:
-        for name in scenes:
-            for variant in variants:
-                rep = dt_trial(name, variant, out_root, trial_steps=trial_steps, every=every)
-                for e in rep["trials"]:
-                    print(
-                        f"{name}-{variant} {e['factor']}x: {e['status']}, {e['rises']} rises, "
-                        f"largest {e.get('max_rise_rel')}",
-                        flush=True,
-                    )
+        full_dt_trials(out_root, scenes, variants, trial_steps=trial_steps, every=every)
         return []
     if args.clean:
-        root = out_root / "constraints"
-        for cj in sorted(root.rglob("case.json")):
-            if add_bulk(cj.parent):
-                print(f"bulk offset measured: {cj.parent}")
-        for fp in clean(root):
-            print(f"deleted {fp}")
+        measure_and_clean(out_root / "constraints")
     cases = []
     if not args.report_only:
-        subdir = SETS[1][0] if args.long else SETS[0][0]
-        (out_root / subdir).mkdir(parents=True, exist_ok=True)
-        t0 = time.perf_counter()
-        for name in scenes:
-            for variant in variants:
-                c = run_case(
-                    name,
-                    variant,
-                    out_root,
-                    quick=args.quick,
-                    budget=args.budget,
-                    trial_steps=trial_steps,
-                    every=every,
-                    tol=args.tol,
-                    quiet=False,
-                    subdir=subdir,
-                )
-                cases.append(c)
-                print(
-                    f"{name}-{variant}: {c['status']} after {c.get('steps')} steps, "
-                    f"{c.get('wall_s', 0):.1f} s; elapsed {time.perf_counter() - t0:.0f} s",
-                    flush=True,
-                )
+        cases = run_cases(args, out_root, scenes, variants, trial_steps=trial_steps,
+                          every=every)
     path = write_report(
         out_root, list(SCENES) if args.report_only or not args.quick else scenes, variants
     )
     print(f"wrote {path}")
+    return cases
+
+
+def full_dt_trials(out_root: Path, scenes, variants, *, trial_steps: int, every: int) -> None:
+    """``--dt-trial``: every factor's trial of each case, printed as it ends."""
+    for name in scenes:
+        for variant in variants:
+            rep = dt_trial(name, variant, out_root, trial_steps=trial_steps, every=every)
+            for e in rep["trials"]:
+                print(
+                    f"{name}-{variant} {e['factor']}x: {e['status']}, {e['rises']} rises, "
+                    f"largest {e.get('max_rise_rel')}",
+                    flush=True,
+                )
+
+
+def measure_and_clean(root: Path) -> None:
+    """``--clean``: the bulk offset of every case with a final.npz, then the large files
+    deleted (each printed)."""
+    for cj in sorted(root.rglob("case.json")):
+        if add_bulk(cj.parent):
+            print(f"bulk offset measured: {cj.parent}")
+    for fp in clean(root):
+        print(f"deleted {fp}")
+
+
+def run_cases(args: argparse.Namespace, out_root: Path, scenes, variants, *,
+              trial_steps: int, every: int) -> list[dict]:
+    """Run each case of ``scenes`` × ``variants`` into the pass's folder (``--long``: the
+    confirmation pass), printing each as it ends; returns their case.json."""
+    subdir = SETS[1][0] if args.long else SETS[0][0]
+    (out_root / subdir).mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    cases = []
+    for name in scenes:
+        for variant in variants:
+            c = run_case(
+                name,
+                variant,
+                out_root,
+                quick=args.quick,
+                budget=args.budget,
+                trial_steps=trial_steps,
+                every=every,
+                tol=args.tol,
+                quiet=False,
+                subdir=subdir,
+            )
+            cases.append(c)
+            print(
+                f"{name}-{variant}: {c['status']} after {c.get('steps')} steps, "
+                f"{c.get('wall_s', 0):.1f} s; elapsed {time.perf_counter() - t0:.0f} s",
+                flush=True,
+            )
     return cases
 
 

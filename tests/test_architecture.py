@@ -203,16 +203,12 @@ LONG = 60
 LONG_FUNCTIONS = {
     "fem_ade/branch.py:follow": (122, "debt: the continuation loop with its step control"),
     "fem_ade/run.py:_main": (103, "debt: the command line's dispatch"),
-    "studies/constraints_study.py:main": (100, "debt: options, then three modes"),
     "fem_ade/loop.py:run_loop": (100, "the loop: one place where a step's outcome (accept, "
                                       "retry, diverge, stop, interrupt) is decided"),
-    "studies/constraints_study.py:run_case": (97, "debt: the dt trial, then the run"),
     "fem_ade/run.py:build_parser": (93, "argparse: one option per statement"),
     "studies/ade_plane.py:report": (80, "debt: a report's sections"),
     "fem_ade/shape.py:count_arms": (80, "debt: a skeleton analysis in stages"),
     "fem_ade/sweep.py:load_sweep": (78, "each mistake in a sweep file: its one-line error"),
-    "studies/constraints_study.py:write_report": (74, "debt: a report's tables"),
-    "studies/constraints_study.py:continuation_check": (74, "debt: one check run after another"),
     "fem_ade/shape.py:extract_surface": (73, "debt: marching cubes and its periodic seams"),
     "fem_ade/scenes.py:scene_from_mapping": (72, "each mistake in a TOML scene: its error"),
     "fem_ade/runs.py:_execute_run": (70, "debt: a run's outputs in the order they are safe"),
