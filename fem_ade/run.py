@@ -302,92 +302,66 @@ def _main(argv, scratch: str | None = None) -> int:
     if args.list:
         print(list_scenes())
         return 0
-    from .model import ModelError
-    from .runs import WriteFailed, default_out, resume, simulate
-
     given = given_options(sys.argv[1:] if argv is None else argv, parser)
     if args.resume is not None:
-        if args.scene is not None:
-            return _error("--resume DIR takes no scene (it is stored in DIR)")
-        extra = sorted(given - RESUME_OPTIONS)
-        if extra:
-            return _error(f"--resume continues with the run's own options; it takes only "
-                          f"--steps and --quiet, not --{', --'.join(extra).replace('_', '-')}")
-        folder = args.resume
-        if scratch is not None and Path(folder).is_dir():  # read the run, write the copy
-            import shutil
-
-            shutil.copytree(folder, scratch, dirs_exist_ok=True)
-            folder = scratch
-        try:
-            result, scene, config = resume(folder, steps=args.steps,
-                                           quiet=args.quiet or scratch is not None,
-                                           with_config=True)
-        except ModelError as err:
-            return _error(str(err))
-        except WriteFailed as err:
-            return _failed(str(err))
-        return _printed(lambda: _report(scene, config.backend, result, args.resume))
+        return _resume_main(args, given, scratch)
     if args.scene is None:
         from .scenes import SCENES
 
         return _error(f"give a scene ({', '.join(SCENES)}) or a .toml file")
     if args.out == "":
         return _error("--out needs a folder name")
+    return _run_main(args, given, scratch)
+
+
+def _resume_main(args, given: set[str], scratch: str | None) -> int:
+    """``--resume DIR``: continue the run stored in DIR (only --steps and --quiet may be
+    given) and report it; returns the exit code."""
+    from .model import ModelError
+    from .runs import WriteFailed, resume
+
+    if args.scene is not None:
+        return _error("--resume DIR takes no scene (it is stored in DIR)")
+    extra = sorted(given - RESUME_OPTIONS)
+    if extra:
+        return _error(f"--resume continues with the run's own options; it takes only "
+                      f"--steps and --quiet, not --{', --'.join(extra).replace('_', '-')}")
+    folder = args.resume
+    if scratch is not None and Path(folder).is_dir():  # read the run, write the copy
+        import shutil
+
+        shutil.copytree(folder, scratch, dirs_exist_ok=True)
+        folder = scratch
     try:
-        from .config import RunConfig
-        from .runs import recipe
-        from .scenes import resolve_scene
+        result, scene, config = resume(folder, steps=args.steps,
+                                       quiet=args.quiet or scratch is not None,
+                                       with_config=True)
+    except ModelError as err:
+        return _error(str(err))
+    except WriteFailed as err:
+        return _failed(str(err))
+    return _printed(lambda: _report(scene, config.backend, result, args.resume))
 
-        chosen = {k: getattr(args, k) for k in vesicle_options() if k in given}
-        if args.scene == "vesicle":
-            from .scenes import vesicle_scene
 
-            if "ic" in given:
-                raise ModelError("--ic picks a reading of the paper's initial ellipsoid; a "
-                                 "vesicle starts from the sharp shape of its --branch")
-            scene = vesicle_scene(**chosen)
-        elif chosen:
-            raise ModelError(f"--{', --'.join(chosen)} describe the vesicle scene; "
-                             f"{args.scene} is another")
-        else:
-            scene = resolve_scene(args.scene)
-        if args.recipe is None:  # the paper's numerics for its scenes; a vesicle: its shape
-            args.recipe = "steady" if args.scene == "vesicle" else "paper"
-        for key, value in recipe(args.recipe, scene).items():
-            if key in ("until_steady", "max_steps") and "steps" in given:
-                continue  # --steps N: N steps (with the recipe's numerics)
-            if key not in given:
-                setattr(args, key, value)
-        if args.max_steps is not None and args.until_steady is None:
-            raise ModelError("--max-steps caps --until-steady; with --steps it would be "
-                             "ignored")
+def _run_main(args, given: set[str], scratch: str | None) -> int:
+    """A new run of ``args.scene`` with the options given and the recipe's for the others
+    (``--dry-run``: only checked), and its report; returns the exit code."""
+    from .model import ModelError
+    from .runs import WriteFailed, default_out, simulate
+
+    try:
+        scene = _chosen_scene(args, given)
+        _apply_recipe(args, given, scene)
         if args.volume is not None:
             scene = scene.with_(volume_functional=args.volume)
         options = backend_options(args)
-        if options.get("mesh"):
-            from .fem.mesh import parse_option as parse_mesh_option
-        if args.n is not None and options.get("mesh") and \
-                parse_mesh_option(options["mesh"])[0] == "file":
-            raise ModelError("--n does not apply to --mesh FILE: the file sets the resolution")
-        if SIZE > 1 and options.get("linalg") != "petsc":
-            raise ModelError(f"{SIZE} MPI ranks would each run the whole job: under mpirun "
-                             "use --backend fem --linalg petsc")
+        _check_backend_options(args, options)
         out = args.out or default_out(scene.name, args.backend)
         if scratch is not None:  # an MPI rank > 0: the same run, written to its own folder
             out, args.out, args.force, args.quiet, args.no_render = scratch, scratch, True, \
                 True, True
-        config = RunConfig.build(
-            scene, backend=args.backend, n=args.n, dt=args.dt, steps=args.steps,
-            until_steady=args.until_steady,
-            max_steps=100_000 if args.max_steps is None else args.max_steps,
-            every=args.every, ic=args.ic, perturb=args.perturb, seed=args.seed,
-            backend_options=options, scheme=args.scheme, constraints=args.constraints,
-            adaptive=args.adaptive, accelerate=args.accelerate,
-            checkpoint_every=args.checkpoint_every, save_every=args.save_every,
-            shape_every=args.shape_every, render=not args.no_render)
-        result = simulate(scene, config=config, phi0=args.phi0, out=out, force=args.force,
-                          fresh=not args.out, quiet=args.quiet,
+        result = simulate(scene, config=_run_config(args, scene, options), phi0=args.phi0,
+                          out=out, force=args.force, fresh=not args.out, quiet=args.quiet,
                           allow_underresolved=args.allow_underresolved, dry_run=args.dry_run)
     except ModelError as err:
         return _error(str(err))
@@ -396,6 +370,75 @@ def _main(argv, scratch: str | None = None) -> int:
     if args.dry_run:
         return _printed(lambda: print(f"fem_ade.run: would run {result}"), 0)
     return _printed(lambda: _report(scene, args.backend, result, out))
+
+
+def _chosen_scene(args, given: set[str]):
+    """The scene named on the command line (``vesicle``: made from its options, which no
+    other scene takes); ModelError for an option the scene does not take."""
+    from .model import ModelError
+    from .scenes import resolve_scene
+
+    chosen = {k: getattr(args, k) for k in vesicle_options() if k in given}
+    if args.scene == "vesicle":
+        from .scenes import vesicle_scene
+
+        if "ic" in given:
+            raise ModelError("--ic picks a reading of the paper's initial ellipsoid; a "
+                             "vesicle starts from the sharp shape of its --branch")
+        return vesicle_scene(**chosen)
+    if chosen:
+        raise ModelError(f"--{', --'.join(chosen)} describe the vesicle scene; "
+                         f"{args.scene} is another")
+    return resolve_scene(args.scene)
+
+
+def _apply_recipe(args, given: set[str], scene) -> None:
+    """Set on ``args`` the recipe's numerics for the options not given (``--steps N``: N
+    steps, without the recipe's stopping rule); ModelError for a --max-steps left without
+    --until-steady."""
+    from .model import ModelError
+    from .runs import recipe
+
+    if args.recipe is None:  # the paper's numerics for its scenes; a vesicle: its shape
+        args.recipe = "steady" if args.scene == "vesicle" else "paper"
+    for key, value in recipe(args.recipe, scene).items():
+        if key in ("until_steady", "max_steps") and "steps" in given:
+            continue  # --steps N: N steps (with the recipe's numerics)
+        if key not in given:
+            setattr(args, key, value)
+    if args.max_steps is not None and args.until_steady is None:
+        raise ModelError("--max-steps caps --until-steady; with --steps it would be "
+                         "ignored")
+
+
+def _check_backend_options(args, options: dict) -> None:
+    """ModelError for backend options that do not go together: --n with a mesh file, or
+    several MPI ranks without the PETSc linear algebra."""
+    from .model import ModelError
+
+    if options.get("mesh"):
+        from .fem.mesh import parse_option as parse_mesh_option
+    if args.n is not None and options.get("mesh") and \
+            parse_mesh_option(options["mesh"])[0] == "file":
+        raise ModelError("--n does not apply to --mesh FILE: the file sets the resolution")
+    if SIZE > 1 and options.get("linalg") != "petsc":
+        raise ModelError(f"{SIZE} MPI ranks would each run the whole job: under mpirun "
+                         "use --backend fem --linalg petsc")
+
+
+def _run_config(args, scene, options: dict):
+    """The run's :class:`fem_ade.config.RunConfig` from the command line's options."""
+    from .config import RunConfig
+
+    return RunConfig.build(
+        scene, backend=args.backend, n=args.n, dt=args.dt, steps=args.steps,
+        until_steady=args.until_steady,
+        max_steps=100_000 if args.max_steps is None else args.max_steps,
+        every=args.every, ic=args.ic, perturb=args.perturb, seed=args.seed,
+        backend_options=options, scheme=args.scheme, constraints=args.constraints,
+        adaptive=args.adaptive, accelerate=args.accelerate,
+        checkpoint_every=args.checkpoint_every, save_every=args.save_every,
+        shape_every=args.shape_every, render=not args.no_render)
 
 
 def _printed(report, code: int | None = None) -> int:

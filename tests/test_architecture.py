@@ -202,7 +202,6 @@ def test_one_definition_of_the_run_status():
 LONG = 60
 LONG_FUNCTIONS = {
     "fem_ade/branch.py:follow": (122, "debt: the continuation loop with its step control"),
-    "fem_ade/run.py:_main": (103, "debt: the command line's dispatch"),
     "fem_ade/loop.py:run_loop": (100, "the loop: one place where a step's outcome (accept, "
                                       "retry, diverge, stop, interrupt) is decided"),
     "fem_ade/run.py:build_parser": (93, "argparse: one option per statement"),
