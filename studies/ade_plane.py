@@ -200,6 +200,8 @@ def _row(cache, b, v, m0) -> dict | None:
 
 
 def report(out: Path, planes, cache: dict, runs: dict, eps: float) -> dict:
+    """Write ade_plane.md, ade_plane.json and the figure: each plane's sharp table and
+    transitions, then its phase-field runs; returns the JSON's payload."""
     lines = ["# The ADE plane: sharp transitions and the phase field's", "",
              f"Written by `studies/ade_plane.py`. κ̄/κ = {KBAR} (the paper's); e = w + "
              f"q(m − m₀)², q = {KBAR * Q_ADE:.4f}, in units of a sphere's bending energy; m the "
@@ -208,69 +210,9 @@ def report(out: Path, planes, cache: dict, runs: dict, eps: float) -> dict:
              f"{eps}, n = {round(1.28 / eps)}, seeded from each branch's sharp shape.", ""]
     payload = {"kbar": KBAR, "eps": eps, "planes": []}
     for v, plane in planes.items():
-        rows = {b: _rows(cache, b, v) for b in plane.branches}
-        table = lowest(rows, plane.m0)
-        sharp_t = transitions(table)
-        torus = "torus" in plane.branches
-        sharp_all = transitions(table, "lowest_all") if torus else []
-        lines += [f"## v = {v}", "", "| m₀ | " + " | ".join(f"e {b} (da)" for b in
-                                                             plane.branches)
-                  + " | lowest of genus 0 |" + (" lowest |" if torus else ""),
-                  "|---|" + "---|" * (len(plane.branches) + 1 + torus)]
-        for t in table:
-            cells = []
-            for b in plane.branches:
-                r = _row(cache, b, v, t["m0"])
-                cells.append(f"{r['e']:.5f} ({r['da']:.4f})" if r else "—")
-            lines.append(f"| {t['m0']:.2f} | " + " | ".join(cells) + f" | {t['lowest'] or '—'} |"
-                         + (f" {t['lowest_all'] or '—'} |" if torus else ""))
-        lines += ["", "Where a branch ends (— above): "]
-        for b, rs in rows.items():
-            lost = [r for r in rs if "missing" in r]
-            for r in lost:
-                lines.append(f"- {b} at m₀ = {r['m0']}: {r['missing']}")
-        lines += ["", "Sharp transitions of the lowest branch of genus 0: " + (", ".join(
-            _say(t, 4) for t in sharp_t) or "none") + (
-            "; of the lowest, the torus included: " + (", ".join(_say(t, 4) for t in sharp_all)
-                                                      or "none") if torus else ""), ""]
-        pf = [r for r in runs.values() if abs(r["v"] - v) < 1e-6 and r["eps"] == eps]
-        pf_table = []
-        if pf:
-            seeds = [b for b in plane.branches if any(r["branch"] == b for r in pf)]
-            lines += [f"Phase field at ε = {eps}: e of the steady state from each seed, with "
-                      "the sharp-surface da and the diffuse da the ADE term sees (dA/(8πDR₀)); "
-                      "† it left its seed's branch for the one named (or its label)", "",
-                      "| m₀ | " + " | ".join(f"from {b}" for b in seeds)
-                      + " | lowest end state |", "|---|" + "---|" * (len(seeds) + 1)]
-            for m0 in plane.pf:
-                cells, ended_e = [], {}
-                sharp_rows = {b: _row(cache, b, v, m0) or {} for b in plane.branches}
-                for b in seeds:
-                    r = next((r for r in pf if r["branch"] == b and r["m0"] == m0), None)
-                    if r is None:
-                        cells.append("—")
-                        continue
-                    ended = classify(r, sharp_rows)
-                    state = ended or r["label"]  # a state of no branch counts too (buds)
-                    ended_e[state] = min(ended_e.get(state, math.inf), r["e"])
-                    dd = (f", diffuse {r['da_diffuse']:.3f}" if r.get("da_diffuse") is not None
-                          else "")
-                    cells.append(f"{r['e']:.4f}" + ("" if ended == b else
-                                                    f" † {ended or r['label']}")
-                                 + f" (da {r['da']:.3f}{dd})")
-                low = min(ended_e, key=ended_e.get) if ended_e else None
-                pf_table.append({"m0": m0, "lowest": low, **ended_e})
-                lines.append(f"| {m0:.2f} | " + " | ".join(cells) + f" | {low or '—'} |")
-            pf_t = transitions(pf_table)
-            ref = sharp_all if torus else sharp_t
-            lines += ["", "Phase-field transitions of the lowest end state: " + (", ".join(
-                _say(t, 3) + " (sharp: " + _sharp_at(ref, t) + ")" for t in pf_t)
-                or "none found on these m₀"), ""]
-        else:
-            pf_t = []
-        payload["planes"].append({"v": v, "sharp": table, "sharp_transitions": sharp_t,
-                                  "sharp_transitions_with_torus": sharp_all,
-                                  "phase_field": pf_table, "phase_field_transitions": pf_t})
+        plane_lines, plane_payload = _plane_section(v, plane, cache, runs, eps)
+        lines += plane_lines
+        payload["planes"].append(plane_payload)
     lines += ["![e along m₀: sharp branches (lines), phase field (markers)](ade-plane.png)", ""]
     notes = out / "ade" / "notes.md"
     if notes.is_file():
@@ -279,6 +221,91 @@ def report(out: Path, planes, cache: dict, runs: dict, eps: float) -> dict:
     (out / "ade_plane.json").write_text(json.dumps(payload, indent=1) + "\n")
     figure(out / "ade-plane.png", planes, cache, runs, eps)
     return payload
+
+
+def _plane_section(v, plane, cache: dict, runs: dict, eps: float) -> tuple[list[str], dict]:
+    """The section of the plane at reduced volume ``v`` and its entry of the payload."""
+    rows = {b: _rows(cache, b, v) for b in plane.branches}
+    table = lowest(rows, plane.m0)
+    sharp_t = transitions(table)
+    torus = "torus" in plane.branches
+    sharp_all = transitions(table, "lowest_all") if torus else []
+    lines = [f"## v = {v}", ""] + _sharp_table(v, plane, cache, table, torus)
+    lines += ["", "Where a branch ends (— above): "]
+    for b, rs in rows.items():
+        lost = [r for r in rs if "missing" in r]
+        for r in lost:
+            lines.append(f"- {b} at m₀ = {r['m0']}: {r['missing']}")
+    lines += ["", "Sharp transitions of the lowest branch of genus 0: " + (", ".join(
+        _say(t, 4) for t in sharp_t) or "none") + (
+        "; of the lowest, the torus included: " + (", ".join(_say(t, 4) for t in sharp_all)
+                                                  or "none") if torus else ""), ""]
+    pf = [r for r in runs.values() if abs(r["v"] - v) < 1e-6 and r["eps"] == eps]
+    pf_table, pf_t = [], []
+    if pf:
+        pf_lines, pf_table = _phase_field_table(v, plane, cache, pf, eps)
+        pf_t = transitions(pf_table)
+        ref = sharp_all if torus else sharp_t
+        lines += pf_lines + ["", "Phase-field transitions of the lowest end state: " + (", ".join(
+            _say(t, 3) + " (sharp: " + _sharp_at(ref, t) + ")" for t in pf_t)
+            or "none found on these m₀"), ""]
+    return lines, {"v": v, "sharp": table, "sharp_transitions": sharp_t,
+                   "sharp_transitions_with_torus": sharp_all,
+                   "phase_field": pf_table, "phase_field_transitions": pf_t}
+
+
+def _sharp_table(v, plane, cache: dict, table: list[dict], torus: bool) -> list[str]:
+    """The sharp branches' e (and da) at each m₀, with the lowest of genus 0 (and, with a
+    torus, the lowest of all)."""
+    lines = ["| m₀ | " + " | ".join(f"e {b} (da)" for b in plane.branches)
+             + " | lowest of genus 0 |" + (" lowest |" if torus else ""),
+             "|---|" + "---|" * (len(plane.branches) + 1 + torus)]
+    for t in table:
+        cells = []
+        for b in plane.branches:
+            r = _row(cache, b, v, t["m0"])
+            cells.append(f"{r['e']:.5f} ({r['da']:.4f})" if r else "—")
+        lines.append(f"| {t['m0']:.2f} | " + " | ".join(cells) + f" | {t['lowest'] or '—'} |"
+                     + (f" {t['lowest_all'] or '—'} |" if torus else ""))
+    return lines
+
+
+def _phase_field_table(v, plane, cache: dict, pf: list[dict],
+                       eps: float) -> tuple[list[str], list[dict]]:
+    """The phase-field runs of the plane: e of each seed's steady state at each m₀ and the
+    lowest end state; returns the table's lines and its rows (m₀, lowest, e of each end
+    state)."""
+    seeds = [b for b in plane.branches if any(r["branch"] == b for r in pf)]
+    lines = [f"Phase field at ε = {eps}: e of the steady state from each seed, with "
+             "the sharp-surface da and the diffuse da the ADE term sees (dA/(8πDR₀)); "
+             "† it left its seed's branch for the one named (or its label)", "",
+             "| m₀ | " + " | ".join(f"from {b}" for b in seeds)
+             + " | lowest end state |", "|---|" + "---|" * (len(seeds) + 1)]
+    pf_table = []
+    for m0 in plane.pf:
+        cells, ended_e = [], {}
+        sharp_rows = {b: _row(cache, b, v, m0) or {} for b in plane.branches}
+        for b in seeds:
+            r = next((r for r in pf if r["branch"] == b and r["m0"] == m0), None)
+            if r is None:
+                cells.append("—")
+                continue
+            ended = classify(r, sharp_rows)
+            state = ended or r["label"]  # a state of no branch counts too (buds)
+            ended_e[state] = min(ended_e.get(state, math.inf), r["e"])
+            cells.append(_pf_cell(r, b, ended))
+        low = min(ended_e, key=ended_e.get) if ended_e else None
+        pf_table.append({"m0": m0, "lowest": low, **ended_e})
+        lines.append(f"| {m0:.2f} | " + " | ".join(cells) + f" | {low or '—'} |")
+    return lines, pf_table
+
+
+def _pf_cell(r: dict, seed: str, ended: str | None) -> str:
+    """A phase-field run's cell: its e, † and the state it ended in if not its seed's, and
+    its sharp (and diffuse) da."""
+    dd = f", diffuse {r['da_diffuse']:.3f}" if r.get("da_diffuse") is not None else ""
+    return (f"{r['e']:.4f}" + ("" if ended == seed else f" † {ended or r['label']}")
+            + f" (da {r['da']:.3f}{dd})")
 
 
 def _say(t: dict, digits: int) -> str:

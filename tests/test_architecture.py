@@ -205,7 +205,6 @@ LONG_FUNCTIONS = {
     "fem_ade/loop.py:run_loop": (100, "the loop: one place where a step's outcome (accept, "
                                       "retry, diverge, stop, interrupt) is decided"),
     "fem_ade/run.py:build_parser": (93, "argparse: one option per statement"),
-    "studies/ade_plane.py:report": (80, "debt: a report's sections"),
     "fem_ade/shape.py:count_arms": (80, "debt: a skeleton analysis in stages"),
     "fem_ade/sweep.py:load_sweep": (78, "each mistake in a sweep file: its one-line error"),
     "fem_ade/shape.py:extract_surface": (73, "debt: marching cubes and its periodic seams"),
