@@ -151,13 +151,20 @@ def minimal(payload: dict) -> dict:
 
 
 def write_report(out: Path, payload: dict, curves: dict, suffix: str = "") -> None:
-    import matplotlib
+    """Write ``OUT/branches{suffix}.md`` (the crossings, where each branch ended, the notes)
+    and its figure."""
+    lines = _crossings_table(payload) + _branch_ends(payload)
+    lines += ["", f"![e along the branches](branches{suffix}.png)", ""]
+    notes = out / "branches_notes.md"
+    if notes.is_file() and not suffix:
+        lines += [notes.read_text()]
+    (out / f"branches{suffix}.md").write_text("\n".join(lines) + "\n")
+    figure(out / f"branches{suffix}.png", payload, curves)
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    from fem_ade.render import save_figure
-
+def _crossings_table(payload: dict) -> list[str]:
+    """The report's head and its table: each transition's crossing at every ε, extrapolated
+    and sharp."""
     eps_list = payload["eps"]
     lines = ["# Transitions from branch crossings", "",
              "Written by `studies/branches.py`: each pair of branches followed in v by "
@@ -176,9 +183,14 @@ def write_report(out: Path, payload: dict, curves: dict, suffix: str = "") -> No
         ex = "—" if r["extrapolated"] is None else f"{r['extrapolated']:.4f}"
         lines.append(f"| {r['transition']} | {r['R0']:g} | " + " | ".join(cells)
                      + f" | {ex} | {r['sharp']:.4f} |")
-    lines += ["", "— : the two branches do not cross where both were followed (one ended "
-              "first). Where each branch ended (its last point: v, label) and its folds "
-              "(turning points in v, where a stable branch meets an unstable one):", ""]
+    return lines
+
+
+def _branch_ends(payload: dict) -> list[str]:
+    """Where each branch of each pair ended, with its folds."""
+    lines = ["", "— : the two branches do not cross where both were followed (one ended "
+             "first). Where each branch ended (its last point: v, label) and its folds "
+             "(turning points in v, where a stable branch meets an unstable one):", ""]
     for r in payload["pairs"]:
         for k, v in r["ended"].items():
             folds = r["folds"].get(k) or []
@@ -186,38 +198,54 @@ def write_report(out: Path, payload: dict, curves: dict, suffix: str = "") -> No
                          + (v if v.startswith("its seed") else f"last point at {v}")
                          + (f"; fold at v = {', '.join(f'{f:.4f}' for f in folds)}"
                             if folds else ""))
-    lines += ["", f"![e along the branches](branches{suffix}.png)", ""]
-    notes = out / "branches_notes.md"
-    if notes.is_file() and not suffix:
-        lines += [notes.read_text()]
-    (out / f"branches{suffix}.md").write_text("\n".join(lines) + "\n")
+    return lines
 
+
+COLOURS = {"prolate": "tab:blue", "oblate": "tab:orange", "stomatocyte": "tab:green"}
+
+
+def figure(path: Path, payload: dict, curves: dict) -> None:
+    """e along both branches of each pair (a panel per pair, a line style per ε), with the
+    crossings and the sharp transition."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fem_ade.render import save_figure
+
+    eps_list = payload["eps"]
     fig, axes = plt.subplots(1, len(payload["pairs"]), figsize=(10, 4))
-    colours = {"prolate": "tab:blue", "oblate": "tab:orange", "stomatocyte": "tab:green"}
     styles = dict(zip(eps_list, ("--", "-", ":"), strict=False))
     for ax, r in zip(axes, payload["pairs"], strict=True):
-        upper, lower = r["transition"].split(" → ")
-        for b in (upper, lower):
-            for e in eps_list:
-                pts = curves.get((b, r["R0"], e)) or []
-                if not pts:
-                    continue
-                v, en, _ = zip(*pts, strict=True)
-                ax.plot(v, en, styles[e], color=colours[b], label=f"{b}, ε = {e:g}")
-                bad = [(a, c) for a, c, u in pts if u > 0]
-                if bad:
-                    ax.plot(*zip(*bad, strict=True), "x", color=colours[b], ms=3,
-                            label=f"{b}, ε = {e:g}: unstable")
-        for e in eps_list:
-            x = r["at"][f"{e:g}"]
-            if x is not None:
-                ax.axvline(x, color="grey", ls=styles[e], lw=0.8)
-        ax.axvline(r["sharp"], color="k", lw=1.2, label="sharp transition")
-        ax.set(xlabel="v", ylabel="e", title=f"{r['transition']} (R₀ = {r['R0']:g})")
-        ax.legend(fontsize=7)
+        _plot_pair(ax, r, curves, eps_list, styles)
     fig.tight_layout()
-    save_figure(fig, out / f"branches{suffix}.png", dpi=110, colours=64)
+    save_figure(fig, path, dpi=110, colours=64)
     plt.close(fig)
+
+
+def _plot_pair(ax, r: dict, curves: dict, eps_list, styles: dict) -> None:
+    """One pair's panel: its branches (unstable points marked ×), crossings and sharp
+    transition."""
+    upper, lower = r["transition"].split(" → ")
+    for b in (upper, lower):
+        for e in eps_list:
+            pts = curves.get((b, r["R0"], e)) or []
+            if not pts:
+                continue
+            v, en, _ = zip(*pts, strict=True)
+            ax.plot(v, en, styles[e], color=COLOURS[b], label=f"{b}, ε = {e:g}")
+            bad = [(a, c) for a, c, u in pts if u > 0]
+            if bad:
+                ax.plot(*zip(*bad, strict=True), "x", color=COLOURS[b], ms=3,
+                        label=f"{b}, ε = {e:g}: unstable")
+    for e in eps_list:
+        x = r["at"][f"{e:g}"]
+        if x is not None:
+            ax.axvline(x, color="grey", ls=styles[e], lw=0.8)
+    ax.axvline(r["sharp"], color="k", lw=1.2, label="sharp transition")
+    ax.set(xlabel="v", ylabel="e", title=f"{r['transition']} (R₀ = {r['R0']:g})")
+    ax.legend(fontsize=7)
 
 
 if __name__ == "__main__":

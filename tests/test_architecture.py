@@ -211,7 +211,6 @@ LONG_FUNCTIONS = {
     "fem_ade/scenes.py:scene_from_mapping": (72, "each mistake in a TOML scene: its error"),
     "fem_ade/runs.py:_execute_run": (70, "debt: a run's outputs in the order they are safe"),
     "studies/sharp_limit.py:eps_figures": (68, "a matplotlib figure, panel by panel"),
-    "studies/branches.py:write_report": (68, "debt: a report's sections"),
     "fem_ade/render.py:render_history": (68, "a matplotlib figure, panel by panel"),
     "studies/convergence.py:temporal": (67, "debt: the runs, then the fit"),
     "fem_ade/shape.py:describe": (67, "debt: one descriptor after another"),
