@@ -160,7 +160,8 @@ def _fmt(t):
 
 
 def report(result: dict, out: Path, suffix: str) -> None:
-
+    """Write ``OUT/cost{suffix}.md`` — a section per (scene, start) with its figure, the
+    steady state's, the axisymmetric geometry's from axisymmetric.md — and the figures."""
     machine = result.get("machine") or {}
     v = machine.get("versions", {})
     lines = ["# What accuracy costs", "",
@@ -171,55 +172,74 @@ def report(result: dict, out: Path, suffix: str) -> None:
              "fast-diagonalization solve). Each run's command is in `cost.json`.", ""]
     for key, s in result["summary"].items():
         scene, start = key.split("/")
-        what = "the paper's initial condition" if start == "paper" else "a resolved start"
-        lines += [f"## {scene} from {what}", "",
-                  "CPU seconds to reach a relative error in E of:", "",
-                  "| discretisation | " + " | ".join(f"{t:g}" for t in TARGETS) + " |",
-                  "|---|" + "---|" * len(TARGETS)]
-        for c, tt in s["time_to"].items():
-            lines.append(f"| {c} | " + " | ".join(_fmt(tt[f"{t:g}"]) for t in TARGETS) + " |")
-        lines += ["", "The best FEM against the spectral reference:", "",
-                  "| error in E | spectral s | best FEM s | which | FEM / spectral |",
-                  "|---|---|---|---|---|"]
-        for t in TARGETS:
-            b = s["best_fem"][f"{t:g}"]
-            lines.append(f"| {t:g} | {_fmt(b['spectral_s'])} | {_fmt(b['fem_s'])} | "
-                         f"{b['fem'] or '—'} | {_fmt(b['ratio'])} |")
         png = f"cost-{scene}-{start}{suffix}.png"
-        lines += ["", "Pareto front (no other run is both cheaper and more accurate):", "",
-                  "| CPU s | err E | discretisation |", "|---|---|---|"]
-        lines += [f"| {p['cpu_s']:.3g} | {p['E_err']:.2e} | {p['label']} |"
-                  for p in s["pareto"]]
-        lines += ["", f"![error against time]({png})", ""]
+        lines += _start_section(scene, start, s, png)
         _plot([r for r in result["runs"] if (r["scene"], r["start"]) == (scene, start)],
               s["pareto"], f"{scene}, {start} start: error against cost", out / png)
-    st = result.get("steady")
-    if st:
-        lines += [f"## {st['scene']}: steady state (exact constraints, stabilized 100× Δt, "
-                  "momentum)", "", "CPU seconds to reach a relative error in E of:", "",
-                  "| discretisation | " + " | ".join(f"{t:g}" for t in TARGETS) + " |",
-                  "|---|" + "---|" * len(TARGETS)]
-        for c, tt in st["time_to"].items():
-            lines.append(f"| {c} | " + " | ".join(_fmt(tt[f"{t:g}"]) for t in TARGETS) + " |")
-        lines += ["", "| discretisation | n | nodes | steps | CPU s | err E |",
-                  "|---|---|---|---|---|---|"]
-        lines += [f"| {p['label']} | {p['n']} | {p['nodes']} | {p['steps']} | "
-                  f"{p['cpu_s']:.3g} | {p['E_err']:.2e} |" for p in st["points"]]
-        lines.append("")
-    axi = out / "axisymmetric.md"
-    if axi.is_file() and not suffix:  # the axisymmetric geometry's cost (its own study)
-        text = axi.read_text()
-        start = text.find("## What a steady state costs")
-        if start >= 0:
-            end = text.find("\n## ", start + 3)
-            section = text[start:] if end < 0 else text[start:end]
-            lines += ["## The axisymmetric geometry against 3D (from `axisymmetric.md`, "
-                      "written by `studies/axisymmetric.py`)", "",
-                      section.split("\n", 1)[1].strip(), ""]
+    if result.get("steady"):
+        lines += _steady_section(result["steady"])
+    if not suffix:
+        lines += _axisymmetric_section(out)
     notes = out / "cost_notes.md"
     if notes.is_file() and not suffix:
         lines += [notes.read_text()]
     (out / f"cost{suffix}.md").write_text("\n".join(lines) + "\n")
+
+
+def _time_to_table(time_to: dict) -> list[str]:
+    """CPU seconds of each discretisation to reach each target error in E."""
+    return ["| discretisation | " + " | ".join(f"{t:g}" for t in TARGETS) + " |",
+            "|---|" + "---|" * len(TARGETS)] + [
+        f"| {c} | " + " | ".join(_fmt(tt[f"{t:g}"]) for t in TARGETS) + " |"
+        for c, tt in time_to.items()]
+
+
+def _start_section(scene: str, start: str, s: dict, png: str) -> list[str]:
+    """The section of one scene and start: the time to each accuracy, the best FEM against
+    the spectral reference, the Pareto front and its figure."""
+    what = "the paper's initial condition" if start == "paper" else "a resolved start"
+    lines = [f"## {scene} from {what}", "", "CPU seconds to reach a relative error in E of:",
+             "", *_time_to_table(s["time_to"])]
+    lines += ["", "The best FEM against the spectral reference:", "",
+              "| error in E | spectral s | best FEM s | which | FEM / spectral |",
+              "|---|---|---|---|---|"]
+    for t in TARGETS:
+        b = s["best_fem"][f"{t:g}"]
+        lines.append(f"| {t:g} | {_fmt(b['spectral_s'])} | {_fmt(b['fem_s'])} | "
+                     f"{b['fem'] or '—'} | {_fmt(b['ratio'])} |")
+    lines += ["", "Pareto front (no other run is both cheaper and more accurate):", "",
+              "| CPU s | err E | discretisation |", "|---|---|---|"]
+    lines += [f"| {p['cpu_s']:.3g} | {p['E_err']:.2e} | {p['label']} |" for p in s["pareto"]]
+    return lines + ["", f"![error against time]({png})", ""]
+
+
+def _steady_section(st: dict) -> list[str]:
+    """The steady state's section: the time to each accuracy and every run."""
+    lines = [f"## {st['scene']}: steady state (exact constraints, stabilized 100× Δt, "
+             "momentum)", "", "CPU seconds to reach a relative error in E of:", "",
+             *_time_to_table(st["time_to"])]
+    lines += ["", "| discretisation | n | nodes | steps | CPU s | err E |",
+              "|---|---|---|---|---|---|"]
+    lines += [f"| {p['label']} | {p['n']} | {p['nodes']} | {p['steps']} | "
+              f"{p['cpu_s']:.3g} | {p['E_err']:.2e} |" for p in st["points"]]
+    return lines + [""]
+
+
+def _axisymmetric_section(out: Path) -> list[str]:
+    """The axisymmetric geometry's cost, copied from axisymmetric.md's section "What a steady
+    state costs" (its own study); nothing without it."""
+    axi = out / "axisymmetric.md"
+    if not axi.is_file():
+        return []
+    text = axi.read_text()
+    start = text.find("## What a steady state costs")
+    if start < 0:
+        return []
+    end = text.find("\n## ", start + 3)
+    section = text[start:] if end < 0 else text[start:end]
+    return ["## The axisymmetric geometry against 3D (from `axisymmetric.md`, "
+            "written by `studies/axisymmetric.py`)", "",
+            section.split("\n", 1)[1].strip(), ""]
 
 
 def _plot(runs, front, title, path) -> None:

@@ -218,7 +218,6 @@ LONG_FUNCTIONS = {
     "fem_ade/sweep_plot.py:phase_diagram": (65, "a matplotlib figure, layer by layer"),
     "fem_ade/sweep.py:main": (62, "debt: the command line's dispatch"),
     "fem_ade/fem/petsc.py:__init__": (62, "the distributed set-up, in PETSc's order"),
-    "studies/cost.py:report": (61, "debt: a report's tables"),
 }
 
 
