@@ -303,21 +303,39 @@ def steady(plan: dict) -> dict:
 def temporal(plan: dict) -> dict:
     """Order in Δt at t = T (T = steps × Δt₀), against the paper's scheme at Δt₀/8; and the
     stabilized scheme's slowdown (spectral: the time error is the same on every backend)."""
-    from fem_ade.backend import make_backend
-    from fem_ade.loop import run_loop
     from fem_ade.scenes import get_scene
 
     cfg = plan["temporal"]
     scene = get_scene(cfg["scene"])
     n, dt0, T = cfg["n"], scene.dt, cfg["steps"] * scene.dt
+    ref, ref_phi = _run_to(scene, n, "paper", dt0 / 8, T)
+    rows = _temporal_rows(scene, n, T, cfg, ref, ref_phi)
+    orders = {}
+    for scheme in ("paper", "stabilized"):
+        sel = [r for r in rows if r["scheme"] == scheme]
+        if len(sel) >= 2:
+            orders[scheme] = float(np.polyfit(np.log([r["dt"] for r in sel]),
+                                              np.log([r["errors"]["phi_L2"] for r in sel]), 1)[0])
+    slow = [_slowdown(scene, n, T, f, ref.final["E"]) for f in cfg["stabilized"]]
+    return {"scene": cfg["scene"], "n": n, "T": T, "dt0": dt0, "rows": rows, "orders": orders,
+            "slowdown": slow}
 
-    def at_T(scheme, dt):
-        be = make_backend("spectral", scene, n=n, scheme=scheme)
-        steps = int(round(T / dt))
-        r = run_loop(be, dt=dt, steps=steps, every=max(1, steps // 50))
-        return r, np.array(be.grid_phi())
 
-    ref, ref_phi = at_T("paper", dt0 / 8)
+def _run_to(scene, n: int, scheme: str, dt: float, T: float):
+    """A spectral run of ``scheme`` at ``dt`` to t = T: its result and its final φ."""
+    from fem_ade.backend import make_backend
+    from fem_ade.loop import run_loop
+
+    be = make_backend("spectral", scene, n=n, scheme=scheme)
+    steps = int(round(T / dt))
+    r = run_loop(be, dt=dt, steps=steps, every=max(1, steps // 50))
+    return r, np.array(be.grid_phi())
+
+
+def _temporal_rows(scene, n: int, T: float, cfg: dict, ref, ref_phi) -> list[dict]:
+    """Each scheme's error at t = T against the reference, at each Δt of the plan (the
+    paper's scheme only below its stability limit ε³)."""
+    dt0 = scene.dt
     rows = []
     for scheme, factors in (("paper", [1 / f for f in cfg["factors"][1:]] + [2.0]),
                             ("stabilized", cfg["stabilized"])):
@@ -325,51 +343,53 @@ def temporal(plan: dict) -> dict:
             dt = dt0 * f
             if scheme == "paper" and dt >= scene.params.eps**3:
                 continue
-            r, phi = at_T(scheme, dt)
+            r, phi = _run_to(scene, n, scheme, dt, T)
             err = {q: abs(r.final[q] - ref.final[q]) / abs(ref.final[q]) for q in ("E", "V", "A")}
             err["phi_L2"] = float(np.linalg.norm(phi - ref_phi) / np.linalg.norm(ref_phi))
             rows.append({"scheme": scheme, "dt": dt, "factor": f, "errors": err,
                          "E": float(r.final["E"]), "steps": r.steps})
             print(f"  temporal: {scheme:10s} dt = {f:g} dt0: E err {err['E']:.2e}, "
                   f"phi {err['phi_L2']:.2e}", flush=True)
-    orders = {}
-    for scheme in ("paper", "stabilized"):
-        sel = [r for r in rows if r["scheme"] == scheme]
-        if len(sel) >= 2:
-            orders[scheme] = float(np.polyfit(np.log([r["dt"] for r in sel]),
-                                              np.log([r["errors"]["phi_L2"] for r in sel]), 1)[0])
-    target = ref.final["E"]
+    return rows
 
-    class Reached(Exception):
+
+class _Reached(Exception):
+    """The run has reached the target energy (raised by :class:`_Watch`)."""
+
+
+class _Watch:
+    """A history writer that stops the run at the first row with E <= ``target``."""
+
+    def __init__(self, target: float):
+        self.target, self.hit = target, None
+
+    def write(self, row):
+        if row["E"] <= self.target:
+            self.hit = row
+            raise _Reached
+
+
+def _slowdown(scene, n: int, T: float, f: float, target: float) -> dict:
+    """When the stabilized scheme at ``f`` × Δt₀ reaches the energy ``target`` (the paper's
+    scheme's at T): its time, as a multiple of T, beside the predicted 1 + s₀Δt."""
+    from fem_ade.backend import make_backend
+    from fem_ade.loop import run_loop
+
+    be = make_backend("spectral", scene, n=n, scheme="stabilized")
+    dt = f * scene.dt
+    watch = _Watch(target)
+    try:
+        run_loop(be, dt=dt, steps=int(200 * T / dt) + 1, every=1, history=watch)
+    except _Reached:
         pass
-
-    class Watch:  # a history writer that stops the run at the first row with E <= target
-        hit = None
-
-        def write(self, row):
-            if row["E"] <= target:
-                self.hit = row
-                raise Reached
-
-    slow = []
-    for f in cfg["stabilized"]:
-        be = make_backend("spectral", scene, n=n, scheme="stabilized")
-        dt = f * dt0
-        watch = Watch()
-        try:
-            run_loop(be, dt=dt, steps=int(200 * T / dt) + 1, every=1, history=watch)
-        except Reached:
-            pass
-        hit = watch.hit
-        s0 = be.stab[0] if be.stab else float("nan")
-        entry = {"factor": f, "dt": dt, "s0": s0, "t_reach": hit["t"] if hit else None,
-                 "slowdown": hit["t"] / T if hit else None, "predicted": (1.0 / dt + s0) * dt}
-        slow.append(entry)
-        print(f"  slowdown: stabilized dt = {f:g} dt0 reaches E_paper(T) at t = "
-              f"{entry['t_reach']} ({entry['slowdown']}x T; 1 + s0 dt = "
-              f"{entry['predicted']:.3g})", flush=True)
-    return {"scene": cfg["scene"], "n": n, "T": T, "dt0": dt0, "rows": rows, "orders": orders,
-            "slowdown": slow}
+    hit = watch.hit
+    s0 = be.stab[0] if be.stab else float("nan")
+    entry = {"factor": f, "dt": dt, "s0": s0, "t_reach": hit["t"] if hit else None,
+             "slowdown": hit["t"] / T if hit else None, "predicted": (1.0 / dt + s0) * dt}
+    print(f"  slowdown: stabilized dt = {f:g} dt0 reaches E_paper(T) at t = "
+          f"{entry['t_reach']} ({entry['slowdown']}x T; 1 + s0 dt = "
+          f"{entry['predicted']:.3g})", flush=True)
+    return entry
 
 
 def _strip(obj):

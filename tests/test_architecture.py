@@ -212,7 +212,6 @@ LONG_FUNCTIONS = {
     "fem_ade/runs.py:_execute_run": (70, "debt: a run's outputs in the order they are safe"),
     "studies/sharp_limit.py:eps_figures": (68, "a matplotlib figure, panel by panel"),
     "fem_ade/render.py:render_history": (68, "a matplotlib figure, panel by panel"),
-    "studies/convergence.py:temporal": (67, "debt: the runs, then the fit"),
     "fem_ade/shape.py:describe": (67, "debt: one descriptor after another"),
     "studies/gallery.py:write_report": (65, "debt: a report's tables"),
     "fem_ade/sweep_plot.py:phase_diagram": (65, "a matplotlib figure, layer by layer"),
