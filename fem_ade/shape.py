@@ -172,13 +172,7 @@ def extract_surface(phi: np.ndarray, L: float) -> Surface:
     ``phi``: array (n0, n1, n2), φ at (i, j, k)·L/n per direction (periodic). See the module
     docstring for centring, periodic closing and orientation.
     """
-    import pyvista as pv
-
-    phi = np.asarray(phi, dtype=float)
-    if phi.ndim != 3:
-        raise ValueError(f"phi must be a 3D grid array, got shape {phi.shape}")
-    if not np.all(np.isfinite(phi)):
-        raise ValueError("phi has non-finite values")
+    phi = _checked_field(phi)
     shape = np.array(phi.shape)
     h = L / shape
     phi = np.where(phi == 0.0, 1e-12, phi)  # no exact zeros at nodes: no degenerate triangles
@@ -189,31 +183,15 @@ def extract_surface(phi: np.ndarray, L: float) -> Surface:
         shift.append(0 if s is None else s)
     rolled = np.roll(phi, [-s for s in shift], axis=(0, 1, 2))
     origin = np.array(shift) * h
-    padded = np.pad(rolled, [(0, 1)] * 3, mode="wrap")
-
-    grid = pv.ImageData(dimensions=padded.shape, spacing=tuple(h), origin=tuple(origin))
-    grid.point_data["phi"] = padded.ravel(order="F")
-    surf = grid.contour([0.0], scalars="phi", method="flying_edges")
-    empty = np.zeros((0, 3), dtype=np.int64)
-    if surf.n_points == 0 or surf.n_cells == 0:
+    mesh = _contour(rolled, h, origin)
+    if mesh is None:
+        empty = np.zeros((0, 3), dtype=np.int64)
         return Surface(np.zeros((0, 3)), empty, np.zeros(0, np.int64), empty,
                        np.zeros(0, np.int64), 0, [], tuple(shift), origin, h, float(L), rolled,
                        bool(rolled.flat[0] > 0))
-    surf = surf.triangulate()
-    points = np.asarray(surf.points, dtype=float)
-    faces = np.asarray(surf.regular_faces, dtype=np.int64)
-
-    # identify periodic images (and any duplicate point) on a fine lattice
-    periods = shape.astype(np.int64) * _QUANT
-    keys = np.round((points - origin) / h * _QUANT).astype(np.int64) % periods
-    _, first, vertex = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-    vertex = vertex.ravel()
-    tri = vertex[faces]
-    good = (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
-    faces, tri = faces[good], tri[good]
-
+    points, faces = mesh
+    vertex, faces, tri, nv = _identify_periodic(points, faces, origin, h, shape)
     # components of the identified triangulation
-    nv = first.size
     e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
     adj = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(nv, nv))
     ncomp, vlabel = connected_components(adj, directed=False)
@@ -221,30 +199,83 @@ def extract_surface(phi: np.ndarray, L: float) -> Surface:
 
     S = Surface(points, faces, vertex, tri, tlabel, ncomp, [], tuple(shift), origin, h,
                 float(L), rolled, bool(rolled[0, 0, 0] > 0))
-    # orient out of {φ > 0}: normal · ∇φ < 0
+    _orient(S)
+    S.component = _ranked_by_area(S, tlabel, ncomp)
+    S.wraps = _wrapping(S, ncomp, L)
+    return S
+
+
+def _checked_field(phi) -> np.ndarray:
+    """``phi`` as a float array; ValueError unless it is a finite 3D grid."""
+    phi = np.asarray(phi, dtype=float)
+    if phi.ndim != 3:
+        raise ValueError(f"phi must be a 3D grid array, got shape {phi.shape}")
+    if not np.all(np.isfinite(phi)):
+        raise ValueError("phi has non-finite values")
+    return phi
+
+
+def _contour(rolled: np.ndarray, h: np.ndarray,
+             origin: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Marching cubes (flying edges) of {φ = 0} on the periodically padded grid: its
+    points and triangles (None if there is no surface)."""
+    import pyvista as pv
+
+    padded = np.pad(rolled, [(0, 1)] * 3, mode="wrap")
+    grid = pv.ImageData(dimensions=padded.shape, spacing=tuple(h), origin=tuple(origin))
+    grid.point_data["phi"] = padded.ravel(order="F")
+    surf = grid.contour([0.0], scalars="phi", method="flying_edges")
+    if surf.n_points == 0 or surf.n_cells == 0:
+        return None
+    surf = surf.triangulate()
+    return np.asarray(surf.points, dtype=float), np.asarray(surf.regular_faces, dtype=np.int64)
+
+
+def _identify_periodic(points: np.ndarray, faces: np.ndarray, origin: np.ndarray,
+                       h: np.ndarray, shape: np.ndarray):
+    """Periodic images (and any duplicate point) identified on a fine lattice: the vertex
+    of each point, the faces left non-degenerate, their vertex triples and the number of
+    vertices."""
+    periods = shape.astype(np.int64) * _QUANT
+    keys = np.round((points - origin) / h * _QUANT).astype(np.int64) % periods
+    _, first, vertex = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    vertex = vertex.ravel()
+    tri = vertex[faces]
+    good = (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
+    return vertex, faces[good], tri[good], first.size
+
+
+def _orient(S: Surface) -> None:
+    """Turn each triangle of ``S`` out of {φ > 0} (normal · ∇φ < 0)."""
+    faces = S.faces
     p0, e1, e2 = S.triangle_vectors()
     centroid = p0 + (e1 + e2) / 3.0
     normal = np.cross(e1, e2)
-    step = 0.25 * float(h.min())
+    step = 0.25 * float(S.h.min())
     nn = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     outward = S.phi_at(centroid + step * nn) < S.phi_at(centroid - step * nn)
     S.faces = np.where(outward[:, None], faces, faces[:, [0, 2, 1]])
-    S.tri = vertex[S.faces]
+    S.tri = S.vertex[S.faces]
 
-    # components ordered by area, largest first
+
+def _ranked_by_area(S: Surface, tlabel: np.ndarray, ncomp: int) -> np.ndarray:
+    """Each triangle's component renumbered by area, largest first."""
     area = np.linalg.norm(S.triangle_normals(), axis=1)
     comp_area = np.bincount(tlabel, weights=area, minlength=ncomp)
     order = np.argsort(-comp_area, kind="stable")
     rank = np.empty(ncomp, dtype=np.int64)
     rank[order] = np.arange(ncomp)
-    S.component = rank[tlabel]
-    # a component wraps if it reaches a box face (only possible along axes without free layer)
-    rel = points - origin
-    on_face = np.any((rel < 1e-9 * h) | (rel > L - 1e-9 * h), axis=1)
+    return rank[tlabel]
+
+
+def _wrapping(S: Surface, ncomp: int, L: float) -> list[bool]:
+    """Per component: it reaches a box face, so it wraps (only possible along axes without a
+    free layer)."""
+    rel = S.points - S.origin
+    on_face = np.any((rel < 1e-9 * S.h) | (rel > L - 1e-9 * S.h), axis=1)
     touches = np.zeros(ncomp, dtype=bool)
     touches[S.component[on_face[S.faces].any(axis=1)]] = True
-    S.wraps = [bool(w) for w in touches]
-    return S
+    return [bool(w) for w in touches]
 
 
 # --- topology and geometry of one component --------------------------------------------
@@ -340,33 +371,59 @@ def count_arms(S: Surface, c: int, *, threshold: float = 0.1,
     on the surface, so each counts.
     """
     mask = S.component == c
-    tri = S.tri[mask]
-    faces = S.faces[mask]
-    verts = np.unique(tri)
-    if verts.size < 4:
+    found = _component_vertices(S, mask)
+    if found is None:
         return 0
-    local = np.full(int(S.tri.max()) + 1, -1, dtype=np.int64)
-    local[verts] = np.arange(verts.size)
-    # a representative point per identified vertex (unwrapped coordinates)
-    P = np.zeros((verts.size, 3))
-    P[local[S.tri[mask].ravel()]] = S.points[faces.ravel()]
+    P, t = found
     vol, moment = _signed_volume(S, mask)
     if abs(vol) > 1e-12 * S.L**3:
         xc = moment / vol
     else:
         xc = P.mean(axis=0)
     r = np.linalg.norm(P - xc, axis=1)
+    tree = _LobeTree(S, P, xc, r, see_level)
     tol = threshold * float(r.max())
-    t = local[tri]
     e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    nv = verts.size
+    nv = len(P)
     adj = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(nv, nv)).tocsr()
     adj = (adj + adj.T).tocsr()
     indptr, indices = adj.indptr, adj.indices
+    for v in np.argsort(-r, kind="stable"):
+        tree.add(v, indices[indptr[v]:indptr[v + 1]], tol)
+    return tree.count()
 
-    parent = np.full(nv, -1, dtype=np.int64)
 
-    def find(i):
+def _component_vertices(S: Surface, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """A point (unwrapped coordinates) per identified vertex of the triangles in ``mask``
+    and those triangles as indices into them; None for fewer than 4 vertices."""
+    tri = S.tri[mask]
+    faces = S.faces[mask]
+    verts = np.unique(tri)
+    if verts.size < 4:
+        return None
+    local = np.full(int(S.tri.max()) + 1, -1, dtype=np.int64)
+    local[verts] = np.arange(verts.size)
+    P = np.zeros((verts.size, 3))
+    P[local[S.tri[mask].ravel()]] = S.points[faces.ravel()]
+    return P, local[tri]
+
+
+class _LobeTree:
+    """The merge tree of :func:`count_arms`: vertices (points ``P`` at distances ``r`` from
+    the centroid ``xc``) added in order of decreasing r; each region (a union-find root)
+    keeps its highest vertex and its lobe peaks."""
+
+    def __init__(self, S: Surface, P: np.ndarray, xc: np.ndarray, r: np.ndarray,
+                 see_level: float):
+        self.S, self.P, self.xc, self.r, self.see_level = S, P, xc, r, see_level
+        self.parent = np.full(len(P), -1, dtype=np.int64)
+        self.peak: dict[int, int] = {}  # root -> highest vertex of its region
+        self.lobes: dict[int, list[int]] = {}  # root -> lobe peaks of its region
+        self._seen: dict[tuple[int, int], bool] = {}
+
+    def find(self, i):
+        """The root of ``i``'s region (compressing the path to it)."""
+        parent = self.parent
         root = i
         while parent[root] != root:
             root = parent[root]
@@ -374,51 +431,63 @@ def count_arms(S: Surface, c: int, *, threshold: float = 0.1,
             parent[i], i = root, parent[i]
         return root
 
-    peak: dict[int, int] = {}  # root -> highest vertex of its region
-    lobes: dict[int, list[int]] = {}  # root -> lobe peaks of its region
-    seg_cache: dict[tuple[int, int], bool] = {}
-
-    def sees(i: int, j: int) -> bool:
+    def sees(self, i: int, j: int) -> bool:
+        """φ ≥ see_level all along the segment between vertices i and j."""
         key = (min(i, j), max(i, j))
-        if key not in seg_cache:
+        if key not in self._seen:
+            P = self.P
             length = float(np.linalg.norm(P[j] - P[i]))
-            m = max(8, int(math.ceil(length / (0.5 * float(S.h.min())))))
+            m = max(8, int(math.ceil(length / (0.5 * float(self.S.h.min())))))
             s = np.linspace(0.0, 1.0, m + 1)[1:-1, None]
-            seg_cache[key] = bool(S.phi_at(P[i] + s * (P[j] - P[i])).min() >= see_level)
-        return seg_cache[key]
+            self._seen[key] = bool(self.S.phi_at(P[i] + s * (P[j] - P[i])).min()
+                                   >= self.see_level)
+        return self._seen[key]
 
-    def apart(i: int, j: int) -> bool:
+    def apart(self, i: int, j: int) -> bool:
         """Two peaks less than 135° apart seen from the centroid: neighbouring arms, even
         where the segment between them crosses the body (stubby arms of a fat starfish)."""
-        a, b = P[i] - xc, P[j] - xc
+        a, b = self.P[i] - self.xc, self.P[j] - self.xc
         return float(a @ b) > -0.7 * float(np.linalg.norm(a) * np.linalg.norm(b))
 
-    def nearest(peaks: list[int], v: int) -> int:
-        d = np.linalg.norm(P[peaks] - P[v], axis=1)
+    def nearest(self, peaks: list[int], v: int) -> int:
+        """The peak of ``peaks`` nearest to vertex v."""
+        d = np.linalg.norm(self.P[peaks] - self.P[v], axis=1)
         return peaks[int(np.argmin(d))]
 
-    for v in np.argsort(-r, kind="stable"):
-        roots = {find(u) for u in indices[indptr[v]:indptr[v + 1]] if parent[u] >= 0}
+    def add(self, v, neighbours: np.ndarray, tol: float) -> None:
+        """Add vertex v: a new region, or the regions of its added neighbours joined at v."""
+        parent, r, peak = self.parent, self.r, self.peak
+        roots = {self.find(u) for u in neighbours if parent[u] >= 0}
         parent[v] = v
         if not roots:
-            peak[v], lobes[v] = v, [v]
-            continue
+            peak[v], self.lobes[v] = v, [v]
+            return
         ordered = sorted(roots, key=lambda q: -r[peak[q]])
         main = ordered[0]
         parent[v] = main
         for other in ordered[1:]:
             parent[other] = main
-            a, b = nearest(lobes[main], v), nearest(lobes[other], v)
-            if r[peak[other]] - r[v] >= tol and (not sees(a, b) or apart(a, b)):
-                lobes[main] = lobes[main] + lobes[other]
-            else:  # one lobe: keep the higher of the two meeting peaks
-                keep = [q for q in lobes[other] if q != b]
-                if r[b] > r[a]:
-                    lobes[main] = [q for q in lobes[main] if q != a] + [b]
-                lobes[main] = lobes[main] + keep
-            del lobes[other], peak[other]
-    roots = {find(i) for i in range(nv)}
-    return int(sum(len(lobes[q]) for q in roots))
+            self.join(main, other, v, tol)
+
+    def join(self, main, other, v, tol: float) -> None:
+        """Region ``other`` meets the higher ``main`` at saddle v: its lobes become main's,
+        as lobes of their own if it persists ``tol`` and the two nearest peaks are
+        neighbouring arms or do not see each other, else with the two peaks as one."""
+        lobes, r = self.lobes, self.r
+        a, b = self.nearest(lobes[main], v), self.nearest(lobes[other], v)
+        if r[self.peak[other]] - r[v] >= tol and (not self.sees(a, b) or self.apart(a, b)):
+            lobes[main] = lobes[main] + lobes[other]
+        else:  # one lobe: keep the higher of the two meeting peaks
+            keep = [q for q in lobes[other] if q != b]
+            if r[b] > r[a]:
+                lobes[main] = [q for q in lobes[main] if q != a] + [b]
+            lobes[main] = lobes[main] + keep
+        del lobes[other], self.peak[other]
+
+    def count(self) -> int:
+        """The number of lobes of all regions."""
+        roots = {self.find(i) for i in range(len(self.P))}
+        return int(sum(len(self.lobes[q]) for q in roots))
 
 
 # --- the descriptors -------------------------------------------------------------------
@@ -444,43 +513,13 @@ def describe(phi: np.ndarray, L: float, *, V: float | None = None, A: float | No
     """
     S = surface if surface is not None else extract_surface(phi, L)
     nc = S.n_components
-    genus, arms, areas, closed_vols = [], [], [], []
-    area_t = np.linalg.norm(S.triangle_normals(), axis=1) if nc else np.zeros(0)
-    H_total = 0.0
-    for c in range(nc):
-        mask = S.component == c
-        chi = euler_characteristic(S.tri[mask])
-        genus.append(int(round((2 - chi) / 2)))
-        areas.append(float(area_t[mask].sum()))
-        H_total += _mean_curvature_integral(S, mask)
-        if S.wraps[c]:
-            arms.append(None)
-            closed_vols.append(None)
-        else:
-            arms.append(count_arms(S, c, threshold=arm_threshold))
-            closed_vols.append(_signed_volume(S, mask)[0])
+    genus, arms, areas, closed_vols, H_total = _per_component(S, arm_threshold)
     A_sharp = float(sum(areas))
     if nc and all(v is not None for v in closed_vols):
         V_sharp = float(sum(closed_vols)) + (S.L**3 if S.background_positive else 0.0)
     else:  # a wrapping surface encloses no volume of R³: count grid cells with φ > 0
         V_sharp = float(np.count_nonzero(S.phi > 0) * np.prod(S.h))
-
-    # nesting: a vertex of i inside the closed surface j
-    inside_of: list[int | None] = [None] * nc
-    tris = S.points[S.faces]
-    for i in range(nc):
-        if S.wraps[i]:
-            continue
-        probe = S.points[S.faces[S.component == i][0, 0]]
-        best = None
-        for j in range(nc):
-            if j == i or S.wraps[j]:
-                continue
-            if abs(winding_number(probe, tris[S.component == j])) >= 0.5:
-                if best is None or areas[j] < areas[best]:
-                    best = j
-        inside_of[i] = best
-
+    inside_of = _nesting(S, areas)
     sharp_m = (H_total / (4.0 * math.pi * math.sqrt(A_sharp / (4.0 * math.pi)))
                if A_sharp > 0 else math.nan)
     sources = {"V": "given" if V is not None else "sharp",
@@ -509,6 +548,48 @@ def describe(phi: np.ndarray, L: float, *, V: float | None = None, A: float | No
                   "reduced_area_difference": sharp_m},
         "shift": list(S.shift),
     } | _with_label(S, nc, genus, inside_of, arms)
+
+
+def _per_component(S: Surface, arm_threshold: float):
+    """Per component, largest first: genus, arms (None if it wraps), area and enclosed
+    volume (None if it wraps); and the mean curvature integral of them all."""
+    genus, arms, areas, closed_vols = [], [], [], []
+    area_t = np.linalg.norm(S.triangle_normals(), axis=1) if S.n_components else np.zeros(0)
+    H_total = 0.0
+    for c in range(S.n_components):
+        mask = S.component == c
+        chi = euler_characteristic(S.tri[mask])
+        genus.append(int(round((2 - chi) / 2)))
+        areas.append(float(area_t[mask].sum()))
+        H_total += _mean_curvature_integral(S, mask)
+        if S.wraps[c]:
+            arms.append(None)
+            closed_vols.append(None)
+        else:
+            arms.append(count_arms(S, c, threshold=arm_threshold))
+            closed_vols.append(_signed_volume(S, mask)[0])
+    return genus, arms, areas, closed_vols, H_total
+
+
+def _nesting(S: Surface, areas: list[float]) -> list[int | None]:
+    """Per component: the smallest closed component enclosing it (a vertex of it inside),
+    or None."""
+    nc = S.n_components
+    inside_of: list[int | None] = [None] * nc
+    tris = S.points[S.faces]
+    for i in range(nc):
+        if S.wraps[i]:
+            continue
+        probe = S.points[S.faces[S.component == i][0, 0]]
+        best = None
+        for j in range(nc):
+            if j == i or S.wraps[j]:
+                continue
+            if abs(winding_number(probe, tris[S.component == j])) >= 0.5:
+                if best is None or areas[j] < areas[best]:
+                    best = j
+        inside_of[i] = best
+    return inside_of
 
 
 def _with_label(S, nc, genus, inside_of, arms) -> dict:
