@@ -28,7 +28,8 @@ meridian     centre, axis (default z), r, z, scale: the surface of revolution of
              (r, z) × scale, pole to pole or a closed loop (a torus); ``python -m sharp_ref
              BRANCH --v V --json`` prints one (R₀ = 1: scale is R₀ in the box)
 file         path: φ of an earlier run (its folder, final.npz, or an .npz with ``phi_grid`` or
-             ``phi`` on a uniform grid), resampled by periodic cubic splines
+             ``phi`` on a uniform grid), resampled by periodic cubic splines; an axisymmetric
+             run's field is its (r, z) nodes' values revolved about its axis
 ===========  ==================================================================================
 
 Joining shapes takes the maximum of their level functions (their union) and carving one out
@@ -504,7 +505,10 @@ class Meridian(Shape):
 
 @dataclass(frozen=True)
 class FieldIC(Shape):
-    """φ of an earlier run (``path``) or an array (``grid``), resampled to the new points."""
+    """φ of an earlier run (``path``) or an array (``grid``), resampled to the new points.
+    The field of an axisymmetric run (its (r, z) nodes and axis, :func:`load_meridian_field`)
+    is a surface of revolution about that axis: it is evaluated from its nodes, in either
+    geometry."""
 
     kind: ClassVar[str] = "file"
     spec: ClassVar[dict] = {"path": "str"}
@@ -520,7 +524,18 @@ class FieldIC(Shape):
     def values(self) -> np.ndarray:
         return self.grid if self.grid is not None else load_grid_field(self.path)
 
+    def meridian(self) -> dict | None:
+        """The (r, z) field of an axisymmetric run's file, or None."""
+        return load_meridian_field(self.path) if self.path else None
+
+    def axis_of_revolution(self):
+        m = self.meridian()
+        return None if m is None else tuple(float(a) for a in m["axis"])
+
     def field_values(self, points, L):
+        m = self.meridian()
+        if m is not None:
+            return meridian_values(m, points)
         return resample_periodic(self.values(), L, points)
 
     def to_mapping(self):
@@ -563,6 +578,49 @@ def load_grid_field(path: str | Path) -> np.ndarray:
     except (OSError, ValueError, EOFError) as err:
         raise ModelError(f"cannot read the initial field {path}: {err}") from None
     return check_grid_field(phi, f"the field in {path}")
+
+
+#: what a field file of an axisymmetric run holds besides its grid (final.npz's keys)
+MERIDIAN_KEYS = ("axis", "points", "phi")
+
+
+def load_meridian_field(path: str | Path) -> dict | None:
+    """{axis, points, phi} of an axisymmetric run's field file (a run folder, its final.npz,
+    or an initial.npz that kept them): φ at its (r, z) nodes, a tensor grid, and the (x, y)
+    of its axis; None for any other file (a 3D run's, a bare grid)."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "final.npz"
+    try:
+        with np.load(path) as z:
+            if not set(MERIDIAN_KEYS) <= set(z.files):
+                return None
+            out = {k: np.array(z[k], dtype=float) for k in MERIDIAN_KEYS}
+    except (OSError, ValueError, EOFError):
+        return None
+    points, phi = out["points"], out["phi"]
+    if out["axis"].shape != (2,) or points.ndim != 2 or points.shape[0] != 2 or \
+            phi.shape != (points.shape[1],) or tensor_axes(points) is None:
+        return None
+    return out
+
+
+def meridian_values(m: dict, points: np.ndarray) -> np.ndarray:
+    """The surface of revolution of an (r, z) field (:func:`load_meridian_field`) at 3D
+    ``points`` (3, ...): the bicubic spline through its nodes (exact there: a run started
+    on the same nodes starts from the same field) at r = distance from its axis; beyond its
+    nodes the nearest edge's values (the far field)."""
+    from scipy.interpolate import RectBivariateSpline
+
+    r_nodes, z_nodes = tensor_axes(m["points"])
+    table = m["phi"].reshape(len(r_nodes), len(z_nodes))
+    points = np.asarray(points, dtype=float)
+    r = np.hypot(points[0] - m["axis"][0], points[1] - m["axis"][1])
+    k = min(3, len(r_nodes) - 1, len(z_nodes) - 1)
+    spline = RectBivariateSpline(r_nodes, z_nodes, table, kx=k, ky=k, s=0)
+    values = spline.ev(np.clip(r, r_nodes[0], r_nodes[-1]),
+                       np.clip(points[2], z_nodes[0], z_nodes[-1]))
+    return np.clip(values, -1.0, 1.0)
 
 
 def tensor_axes(points: np.ndarray):

@@ -162,12 +162,13 @@ def simulate(
             constraints=constraints, adaptive=adaptive, accelerate=accelerate,
             checkpoint_every=checkpoint_every, save_every=save_every, shape_every=shape_every,
             render=render, backend_options=backend_options)
-    initial = None
+    initial = meridian = None
     if phi0 is not None:
         if isinstance(phi0, (str, Path)):
             scene = scene.with_(ic=FieldIC(path=str(Path(phi0).resolve())))
             scene.ic.check(scene.dim)
             initial = scene.ic.values()  # kept with the run: it resumes if phi0 moves
+            meridian = scene.ic.meridian()  # an axisymmetric run's: its nodes kept too
         else:
             if np.iscomplexobj(phi0):
                 raise ModelError("phi0 must be a real field, got complex values")
@@ -194,7 +195,8 @@ def simulate(
     lock = prepare_out_dir(out, force=force, fresh=fresh)  # ours until the run ends
     try:
         if initial is not None:  # the start field is kept with the run
-            write_fields(out / "initial.npz", {"phi": initial})
+            write_fields(out / "initial.npz", {"phi": initial} if meridian is None else
+                         {"phi_grid": initial, **meridian})
             scene = scene.with_(ic=FieldIC(path=str((out / "initial.npz").resolve()),
                                            grid=initial))
         return _execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)

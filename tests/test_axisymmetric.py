@@ -322,3 +322,29 @@ def test_willmore_torus_in_the_sharp_limit():
                                        backend_options={"geometry": "axisymmetric"}).final))
     e0 = e[1] + (e[1] - e[0]) / 3.0
     assert e0 == pytest.approx(math.pi / 2, rel=1e-3), e
+
+
+def test_a_run_starts_from_an_axisymmetric_runs_end(tmp_path):
+    """``phi0`` = an axisymmetric run's folder: another axisymmetric run on the same nodes
+    starts from its end (E equal to round-off), keeps its (r, z) field in initial.npz and
+    resumes to the end of an uninterrupted run; a 3D run starts from its surface of
+    revolution (E within the 3D grid's error)."""
+    from fem_ade.output import read_history
+
+    scene = vesicle_scene(v=0.9, branch="oblate", eps=0.05)
+    kw = dict(backend="fem", backend_options={"geometry": "axisymmetric"}, every=5,
+              render=False, quiet=True, constraints="exact", scheme="stabilized")
+    simulate(scene, out=tmp_path / "a", steps=20, **kw)
+    end = read_history(tmp_path / "a" / "history.csv")["E"][-1]
+    simulate(scene, out=tmp_path / "part", steps=10, checkpoint_every=5, phi0=tmp_path / "a",
+             **kw)
+    assert read_history(tmp_path / "part" / "history.csv")["E"][0] == pytest.approx(end,
+                                                                                  rel=1e-12)
+    with np.load(tmp_path / "part" / "initial.npz") as z:
+        assert {"phi_grid", "axis", "points", "phi"} <= set(z.files)
+    whole = simulate(scene, out=tmp_path / "whole", steps=15, phi0=tmp_path / "a", **kw)
+    assert resume(tmp_path / "part", steps=15, quiet=True).final == whole.final
+    simulate(scene, out=tmp_path / "3d", steps=1, every=1, phi0=tmp_path / "a",
+             backend="spectral", n=32, render=False, quiet=True)
+    assert read_history(tmp_path / "3d" / "history.csv")["E"][0] == pytest.approx(end,
+                                                                                rel=1e-3)
