@@ -35,6 +35,25 @@ fixed nor swept, ``[run]`` may set only ``n`` and ``backend_options`` (e.g. the 
 Its row is the branch's last point (``steps``: its number of points; ``end``: the
 parameter there; ``folds``: where it turned); one branch per Dask task.
 
+Points can also be listed one by one, beside the grid of ``[axes]`` or instead of it; a
+listed point may start from another point's end (``after``: its final field, resampled to
+this point's nodes), so that a chain of runs — ε halved from the last ε's steady state, a
+steady end kicked to test its stability — is one sweep file::
+
+    [[points]]
+    name = "eps=0.02"                     # its folder's name (letters, digits, . _ - =)
+    seed = "prolate"                      # vesicle: its branch (default: the first seed)
+    scene = {eps = 0.02}                  # over [scene]
+    run = {n = 96}                        # over [run]
+    [[points]]
+    name = "eps=0.01"
+    scene = {eps = 0.01}
+    after = "eps=0.02"                    # starts from that point's final field
+
+Dask runs a point only after the one it starts from; if that one ended without a result
+(failed, diverged) the point is recorded as failed, with the reason. A listed point's
+``scene`` keys are columns of the table, as the axes are; ``after`` is one too.
+
 Each point (one value per axis and one seed) is one run folder ``OUT/points/NAME`` (NAME from
 its parameters, e.g. ``v=0.7_seed=prolate``), run by :func:`run_point` on a Dask worker: a
 ``LocalCluster`` of ``--workers`` processes (one thread each) by default, or the scheduler at
@@ -100,6 +119,9 @@ class Point:
     run: dict = field(default_factory=dict)
     #: a branch point's continuation (param, from, to, step, folds), or None: a run
     branch: dict | None = None
+    #: the point whose end it starts from (its name), and that point's identity
+    after: str | None = None
+    start: dict | None = None
 
     def scene(self):
         from .scenes import resolve_scene, vesicle_scene
@@ -131,6 +153,8 @@ class Point:
                 "seed": self.seed, "run": self.run, "physics": PHYSICS_VERSION}
         if self.branch:  # (absent for a run: the folders of before stay theirs)
             what["branch"] = self.branch
+        if self.after:  # a point is also where it starts from
+            what["after"] = {"point": self.after, "identity": self.start}
         return json.loads(json.dumps(what, sort_keys=True, default=str))
 
     def options(self, scene) -> dict:
@@ -161,8 +185,29 @@ class Sweep:
     seeds: list
     run: dict
     branch: dict | None = None
+    #: the points listed one by one ([[points]]: name, seed, scene, run, after)
+    listed: list = field(default_factory=list)
+
+    def columns(self) -> list[str]:
+        """The table's parameter columns: the axes, then the listed points' scene keys."""
+        extra = [k for p in self.listed for k in p["scene"]]
+        return list(dict.fromkeys([*self.axes, *extra]))
 
     def points(self) -> list[Point]:
+        """The grid's points (one per value of each axis and seed; none when points are
+        listed and there are no axes), then the listed ones."""
+        out = self._grid() if self.axes or not self.listed else []
+        made = {p.name: p for p in out}
+        for spec in self.listed:
+            start = made[spec["after"]].identity() if spec["after"] else None
+            made[spec["name"]] = point = Point(
+                spec["name"], self.base, dict(spec["scene"]),
+                {k: v for k, v in self.fixed.items() if k not in spec["scene"]},
+                spec["seed"], {**self.run, **spec["run"]}, after=spec["after"], start=start)
+            out.append(point)
+        return out
+
+    def _grid(self) -> list[Point]:
         names = list(self.axes)
         out = []
         for combo in itertools.product(*(self.axes[k] for k in names)):
@@ -194,7 +239,7 @@ def load_sweep(path: str | Path) -> Sweep:
         raise ModelError(f"cannot read sweep file {path}: {err}") from None
     except tomllib.TOMLDecodeError as err:
         raise ModelError(f"malformed TOML in {path}: {err}") from None
-    known = {"name", "base", "seeds", "scene", "axes", "run", "branch"}
+    known = {"name", "base", "seeds", "scene", "axes", "run", "branch", "points"}
     unknown = set(data) - known
     if unknown:
         raise ModelError(f"unknown key(s) {', '.join(sorted(unknown))} in {path}; valid: "
@@ -238,31 +283,95 @@ def load_sweep(path: str | Path) -> Sweep:
     both = sorted(set(fixed) & set(axes))
     if both:
         raise ModelError(f"{', '.join(both)} is both fixed ([scene]) and swept ([axes])")
-    if base == "vesicle":
-        from .vesicle import Vesicle
+    for table, keys in (("scene", fixed), ("axes", axes)):
+        _scene_keys(base, keys, f"[{table}]")
+    run = _run_table(data.get("run", {}), "[run]")
+    branch = _branch_table(data.get("branch"), fixed, axes, run)
+    listed = _listed(data.get("points", []), base, seeds, axes)
+    if listed and branch:
+        raise ModelError("[[points]] lists runs; a sweep with a [branch] table follows branches "
+                         "(give them in two sweep files)")
+    sweep = Sweep(str(data.get("name", path.stem)), base, axes, dict(fixed), seeds, run, branch,
+                  listed)
+    check_sweep(sweep)
+    return sweep
 
-        allowed = set(Vesicle.__dataclass_fields__) - {"branch"}
-        for table, keys in (("scene", fixed), ("axes", axes)):
-            bad = sorted(set(keys) - allowed)
-            if bad:
-                raise ModelError(f"[{table}] {', '.join(bad)}: not a parameter of the vesicle "
-                                 f"family (its branch is the seed); valid: "
-                                 f"{', '.join(sorted(allowed))}")
-    run = data.get("run", {})
+
+def _scene_keys(base: str, keys, where: str) -> None:
+    """A vesicle sweep's scene keys must be the family's parameters (ModelError)."""
+    if base != "vesicle":
+        return
+    from .vesicle import Vesicle
+
+    allowed = set(Vesicle.__dataclass_fields__) - {"branch"}
+    bad = sorted(set(keys) - allowed)
+    if bad:
+        raise ModelError(f"{where} {', '.join(bad)}: not a parameter of the vesicle family "
+                         f"(its branch is the seed); valid: {', '.join(sorted(allowed))}")
+
+
+def _run_table(run, where: str) -> dict:
+    """A [run] table (or a listed point's ``run``), its values checked and floats made float."""
     if not isinstance(run, dict):
-        raise ModelError("[run] must be a table")
+        raise ModelError(f"{where} must be a table")
+    run = dict(run)
     for key, value in run.items():
         kind = RUN_KEYS.get(key)
         if kind is None:
-            raise ModelError(f"unknown run option {key!r}; valid: {', '.join(RUN_KEYS)}")
+            raise ModelError(f"unknown run option {key!r} in {where}; valid: "
+                             f"{', '.join(RUN_KEYS)}")
         if kind is float and isinstance(value, int) and not isinstance(value, bool):
             run[key] = float(value)
         elif not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
-            raise ModelError(f"run.{key} must be of type {kind.__name__}, got {value!r}")
-    branch = _branch_table(data.get("branch"), fixed, axes, run)
-    sweep = Sweep(str(data.get("name", path.stem)), base, axes, dict(fixed), seeds, run, branch)
-    check_sweep(sweep)
-    return sweep
+            raise ModelError(f"run.{key} must be of type {kind.__name__}, got {value!r}"
+                             + ("" if where == "[run]" else f" in {where}"))
+    return run
+
+
+#: a listed point's keys
+POINT_KEYS = ("name", "seed", "scene", "run", "after")
+
+
+def _listed(points, base: str, seeds: list, axes: dict) -> list[dict]:
+    """The [[points]] tables, checked for their form: a new plain name each, a seed of the
+    sweep's, scene keys (over [scene]; an axis's too: the point is off the grid), run options,
+    and ``after`` naming a point made before it (a grid point or one listed above: no cycle
+    can be written)."""
+    if not isinstance(points, list) or not all(isinstance(p, dict) for p in points):
+        raise ModelError("points must be a list of tables ([[points]])")
+    grid = set()
+    if axes or not points:
+        grid = {p.name for p in Sweep("", base, axes, {}, seeds, {})._grid()}
+    out, names = [], set(grid)
+    for i, table in enumerate(points, 1):
+        where = f"[[points]] #{i}"
+        unknown = sorted(set(table) - set(POINT_KEYS))
+        if unknown:
+            raise ModelError(f"unknown key(s) {', '.join(unknown)} in {where}; valid: "
+                             f"{', '.join(POINT_KEYS)}")
+        name = table.get("name")
+        if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._=-]*", name):
+            raise ModelError(f"{where} needs a name of letters, digits and . _ - = (its "
+                             f"folder's), got {name!r}")
+        where = f"[[points]] {name}"
+        if name in names:
+            raise ModelError(f"{where}: a point of that name is already in the sweep")
+        seed = table.get("seed", seeds[0])
+        if str(seed) not in map(str, seeds):
+            raise ModelError(f"{where}: seed {seed!r} is not one of the sweep's seeds "
+                             f"({', '.join(map(str, seeds))})")
+        scene = table.get("scene", {})
+        if not isinstance(scene, dict):
+            raise ModelError(f"{where}: scene must be a table")
+        _scene_keys(base, scene, f"{where}: scene")
+        after = table.get("after")
+        if after is not None and after not in names:
+            raise ModelError(f"{where}: after = {after!r} names no point before it (a grid "
+                             "point or one listed above)")
+        out.append({"name": name, "seed": seed, "scene": dict(scene),
+                    "run": _run_table(table.get("run", {}), where), "after": after})
+        names.add(name)
+    return out
 
 
 #: a [branch] table's keys (their types) and the [run] options a branch sweep takes
@@ -312,13 +421,12 @@ def _branch_table(table, fixed: dict, axes: dict, run: dict) -> dict | None:
 def check_sweep(sweep: Sweep) -> None:
     """Every point's parameters and the run options, before anything runs (ModelError, one
     line): each point's vesicle (or scene) without its sharp seed, and the first point's
-    run — its scene built, its configuration checked as a run's."""
-    from .config import RunConfig
+    run and each listed point's — its scene built, its configuration checked as a run's."""
     from .registry import RECIPES
 
-    if "recipe" in sweep.run and sweep.run["recipe"] not in RECIPES:
-        raise ModelError(f"unknown recipe {sweep.run['recipe']!r}; valid: "
-                         f"{', '.join(RECIPES)}")
+    for run in (sweep.run, *(spec["run"] for spec in sweep.listed)):
+        if "recipe" in run and run["recipe"] not in RECIPES:
+            raise ModelError(f"unknown recipe {run['recipe']!r}; valid: {', '.join(RECIPES)}")
     points = sweep.points()
     for point in points:
         try:
@@ -343,9 +451,19 @@ def check_sweep(sweep: Sweep) -> None:
         except (ModelError, TypeError) as err:
             raise ModelError(f"point {first.name}: {err}") from None
         return
+    listed = {spec["name"] for spec in sweep.listed}
+    for point in points:  # the first point's run, and each listed point's (its own options)
+        if point is first or point.name in listed:
+            _check_run(point)
+
+
+def _check_run(point: Point) -> None:
+    """The point's scene built and its run's configuration checked (ModelError, one line)."""
+    from .config import RunConfig
+
     try:
-        scene = first.scene()
-        kw = first.options(scene)
+        scene = point.scene()
+        kw = point.options(scene)
         allow = kw.pop("allow_underresolved", False)
         kw.pop("checkpoint_every", None)
         config = RunConfig.build(scene, **{k: v for k, v in kw.items() if k in (
@@ -355,21 +473,25 @@ def check_sweep(sweep: Sweep) -> None:
                 "render", "seed")})
         config.check(scene, allow_underresolved=allow)
     except TypeError as err:
-        raise ModelError(f"point {first.name}: {err}") from None
+        raise ModelError(f"point {point.name}: {err}") from None
     except ModelError as err:
-        raise ModelError(f"point {first.name}: {err}") from None
+        raise ModelError(f"point {point.name}: {err}") from None
 
 
 # ---------------------------------------------------------------------------------------
 # one point, on a worker
 # ---------------------------------------------------------------------------------------
-def run_point(point: Point, root: str) -> dict:
+def run_point(point: Point, root: str, *started) -> dict:
     """Run (or resume, or skip) one point in ``root/points/NAME`` through
     :func:`fem_ade.jobs.ensure`; its table row. A folder held by another process gives
-    status ``busy`` (the driver tries again later)."""
+    status ``busy`` (the driver tries again later). ``started``: the row of the point it
+    starts from (Dask passes it once that one has run; the folder is what is read)."""
     from .jobs import ensure
 
     folder = Path(root) / "points" / point.name
+    start = _start(point, Path(root))
+    if start is not None and not isinstance(start, Path):  # its start is not there (yet)
+        return start
     _write_json(folder.with_name(point.name + ".point.json"), point.identity())
     if point.branch:
         done = ensure(folder, make=lambda f: _follow(point, f))
@@ -381,10 +503,35 @@ def run_point(point: Point, root: str) -> dict:
                          "e_sharp": _seed_sharp_e(point)})
             return made
 
-        done = ensure(folder, scene, options=point.options)
+        done = ensure(folder, scene, options=point.options, after=start)
     if done.status == Status.BUSY:
         return {"point": point.name, "status": Status.BUSY, "reason": done.reason}
     return {**row(point, Path(root)), "task_s": done.seconds}
+
+
+def _start(point: Point, root: Path) -> Path | dict | None:
+    """The run folder a point starts from (``after``), None without one, or the point's row
+    when it cannot start: ``busy`` while its start has not ended (the driver asks again),
+    ``failed`` with the reason when its start ended without a result."""
+    if point.after is None:
+        return None
+    from .jobs import status_of
+    from .status import HAS_RESULT
+
+    folder = root / "points" / point.name
+    if (folder / "summary.json").is_file():  # it ran: a finished point is not looked at again
+        return root / "points" / point.after
+    start = root / "points" / point.after
+    out = {"point": point.name, **point.values, "seed": point.seed, "after": point.after}
+    status = Status.FAILED if failure_record(start).is_file() else status_of(start)
+    if status in HAS_RESULT:
+        return start
+    if status in ENDED | {Status.FAILED}:
+        reason = f"its start {point.after} ended {status}: there is no field to start from"
+        _write_json(folder.with_name(point.name + ".point.json"), point.identity())
+        record_failure(folder, reason)
+        return {**out, "status": Status.FAILED, "reason": reason}
+    return {**out, "status": Status.BUSY, "reason": f"waits for {point.after} to end"}
 
 
 def _follow(point: Point, folder: Path) -> None:
@@ -516,7 +663,8 @@ def row(point: Point, root: Path) -> dict:
     """The table row of a point, from its run folder (or its failure record)."""
 
     folder = root / "points" / point.name
-    out = {"point": point.name, **point.values, "seed": point.seed}
+    out = {"point": point.name, **point.values, "seed": point.seed,
+           **({"after": point.after} if point.after else {})}
     failed = failure_record(folder)
     if failed.is_file():
         rec = json.loads(failed.read_text())
@@ -587,6 +735,8 @@ def write_table(rows: list[dict], path: Path, axes: list[str]) -> None:
     cols = ["point", *axes, *COLUMNS]
     if any("end" in r for r in rows):  # a branch sweep's
         cols[cols.index("steps") + 1:cols.index("steps") + 1] = ["end", "folds"]
+    if any(r.get("after") for r in rows):  # listed points that start from another's end
+        cols.insert(cols.index("seed") + 1, "after")
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
@@ -611,7 +761,8 @@ def read_table(path: Path) -> list[dict]:
 
     with open(path, newline="") as fh:
         return [{k: parse(v) if k not in ("point", "seed", "genus", "label", "status",
-                                          "reason", "folds") else v for k, v in r.items()}
+                                          "reason", "folds", "after") else v
+                 for k, v in r.items()}
                 for r in csv.DictReader(fh)]
 
 
@@ -649,11 +800,12 @@ def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | Non
     if rerun_changed:  # under the lock: remove the changed points' runs
         check_points(sweep, out, rerun_changed=True)
     points = sweep.points()
-    axes = list(sweep.axes)
+    axes = sweep.columns()
     _write_json(out / "sweep.json", {"name": sweep.name, "base": sweep.base,
                                      "axes": sweep.axes, "scene": sweep.fixed,
                                      "seeds": sweep.seeds, "run": sweep.run,
                                      **({"branch": sweep.branch} if sweep.branch else {}),
+                                     **({"listed": sweep.listed} if sweep.listed else {}),
                                      "points": [p.name for p in points]})
     rows = {p.name: row(p, out) for p in points}
     done = ENDED | {Status.FAILED} if not retry_failed else ENDED
@@ -680,9 +832,12 @@ def _workers_text(client) -> str:
 def _drive(client, todo, out, rows, axes, quiet, retry_s, as_completed):
     from tqdm import tqdm
 
-    by_name = {p.name: p for p in todo}
-    futures = as_completed([client.submit(run_point, p, str(out), key=f"point-{p.name}",
-                                          pure=False) for p in todo])
+    by_name, submitted = {p.name: p for p in todo}, {}
+    for p in todo:  # a listed point after the one it starts from: Dask runs them in order
+        deps = [submitted[p.after]] if p.after in submitted else []
+        submitted[p.name] = client.submit(run_point, p, str(out), *deps, key=f"point-{p.name}",
+                                          pure=False)
+    futures = as_completed(list(submitted.values()))
     failed = 0
     started = time.perf_counter()
     n_workers = max(1, _n(client))
@@ -758,7 +913,7 @@ def main(argv=None) -> int:
             check_points(sweep, out, rerun_changed=False)
             points = sweep.points()
             rows = [row(p, out) for p in points]
-            write_table(rows, out / "sweep.csv", list(sweep.axes))
+            write_table(rows, out / "sweep.csv", sweep.columns())
         else:
             rows = run_sweep(sweep, out, workers=args.workers, scheduler=args.scheduler,
                              quiet=args.quiet, retry_failed=args.retry_failed,

@@ -32,10 +32,19 @@ def _colour(label: str | None) -> str:
 
 
 def draw(rows: list[dict], sweep, out: Path) -> list[Path]:
-    """Draw what the rows allow; the paths written."""
+    """Draw what the rows allow; the paths written: the phase diagram of the grid's points
+    (without axes: the energies of the listed points along their first scene key that all of
+    them set, if any) and the montage of the end shapes."""
     written = []
-    if rows:
-        written.append(phase_diagram(rows, sweep, out / "phase-diagram.png"))
+    listed = {p["name"] for p in getattr(sweep, "listed", [])}
+    grid = [r for r in rows if r["point"] not in listed]
+    if grid and (sweep.axes or not listed):
+        written.append(phase_diagram(grid, sweep, out / "phase-diagram.png"))
+    elif rows:
+        key = next((k for k in sweep.columns()
+                    if all(isinstance(r.get(k), (int, float)) for r in rows)), None)
+        if key is not None:
+            written.append(energy_diagram(rows, sweep, out / "phase-diagram.png", key))
     montage = shape_montage(rows, sweep, out / "montage.png")
     if montage is not None:
         written.append(montage)

@@ -262,6 +262,26 @@ BAD_SWEEPS = [
                                     'backend = "fem"\nn = 16\nbackend_options = {order = 0}'),
      "order"),
     ("max_steps 0", lambda t: t.replace("max_steps = 4", "max_steps = 0"), "max-steps"),
+    ("a listed point without a name", lambda t: t + "[[points]]\nseed = 'sphere'\n",
+     "needs a name"),
+    ("a listed point named twice", lambda t: t + "[[points]]\nname = 'a'\n" * 2,
+     "already in the sweep"),
+    ("a listed point named as a grid point", lambda t: t + "[[points]]\nname = 'v=0.9_seed="
+     "sphere'\n", "already in the sweep"),
+    ("after a point below", lambda t: t + "[[points]]\nname = 'a'\nafter = 'b'\n"
+     "[[points]]\nname = 'b'\n", "names no point before it"),
+    ("after itself", lambda t: t + "[[points]]\nname = 'a'\nafter = 'a'\n",
+     "names no point before it"),
+    ("a listed point's unknown key", lambda t: t + "[[points]]\nname = 'a'\nstart = 'x'\n",
+     "unknown key"),
+    ("a listed point's unknown seed", lambda t: t + "[[points]]\nname = 'a'\nseed = 'pear'\n",
+     "not one of the sweep's seeds"),
+    ("a listed point's bad run option", lambda t: t + "[[points]]\nname = 'a'\n"
+     "run = {n = 'x'}\n", "run.n must be"),
+    ("a listed point's unresolved run", lambda t: t + "[[points]]\nname = 'a'\n"
+     "run = {n = 6}\n", "point a:"),
+    ("a listed point's bad parameter", lambda t: t + "[[points]]\nname = 'a'\n"
+     "scene = {eps = -1}\n", "point a:"),
 ]
 
 
@@ -391,3 +411,98 @@ def test_report_only_over_damaged_folders(tmp_path, capsys):
     assert main([str(path), "--out", str(out), "--report-only"]) == 1
     (row,) = _table(out / "sweep.csv")
     assert row["status"] == "damaged" and "summary.json" in row["reason"]
+
+
+#: a chain of listed points: a from the seed, b from a's end, c from b's at another ε
+CHAIN = """
+name = "chain"
+base = "vesicle"
+seeds = ["sphere"]
+[scene]
+eps = 0.08
+v = 0.9
+[run]
+recipe = "steady"
+backend = "spectral"
+n = 16
+max_steps = 12
+constraints = "exact"
+checkpoint_every = 5
+[[points]]
+name = "a"
+[[points]]
+name = "b"
+after = "a"
+run = {max_steps = 6}
+[[points]]
+name = "c"
+scene = {eps = 0.07}
+after = "b"
+"""
+
+
+def _first_E(folder: Path) -> float:
+    return float(_table(folder / "history.csv")[0]["E"])
+
+
+def _last_E(folder: Path) -> float:
+    return float(_table(folder / "history.csv")[-1]["E"])
+
+
+def test_listed_points_start_from_each_others_end(tmp_path, capsys):
+    path, out = tmp_path / "chain.toml", tmp_path / "out"
+    path.write_text(CHAIN)
+    assert [p.name for p in load_sweep(path).points()] == ["a", "b", "c"]
+    assert main([str(path), "--out", str(out), "--quiet"]) == 0
+    rows = read_table(out / "sweep.csv")
+    assert [(r["point"], r["after"], r["eps"]) for r in rows] == [
+        ("a", "", None), ("b", "a", None), ("c", "b", 0.07)]
+    assert [r["status"] for r in rows] == ["max_steps"] * 3
+    pts = out / "points"
+    assert _first_E(pts / "b") == pytest.approx(_last_E(pts / "a"), rel=1e-12)
+    assert _first_E(pts / "c") != pytest.approx(_first_E(pts / "a"), rel=1e-3)
+    assert not (out / "phase-diagram.png").exists()  # no key that every point sets
+    capsys.readouterr()
+    assert main([str(path), "--out", str(out)]) == 0  # again: nothing runs
+    assert "3 points, 3 done, 0 to run" in capsys.readouterr().out
+    # a at other settings: a refused, and b and c with it (each is where it starts from)
+    from fem_ade.sweep import changed
+
+    other = load_sweep(_write(tmp_path / "other.toml",
+                              CHAIN.replace("max_steps = 12", "max_steps = 11")))
+    assert all(changed(p, out) for p in other.points()), "b, c not changed with their start"
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def test_a_point_after_a_failed_one_fails_with_the_reason(tmp_path):
+    """a failed (its record, as a sweep writes it): b is recorded as failed, with a's
+    status named, and c after b too; nothing of theirs runs."""
+    from fem_ade.jobs import record_failure
+    from fem_ade.sweep import _write_json
+
+    sweep = load_sweep(_write(tmp_path / "chain.toml", CHAIN))
+    out = tmp_path / "out"
+    a = sweep.points()[0]
+    _write_json(out / "sweep.json", {"name": "chain"})  # (a sweep's folder)
+    _write_json(out / "points" / "a.point.json", a.identity())
+    record_failure(out / "points" / "a", "ModelError: made to fail")
+    rows = run_sweep(sweep, out, workers=1, quiet=True)
+    assert [r["status"] for r in rows] == ["failed"] * 3
+    assert "its start a ended failed" in rows[1]["reason"]
+    assert "its start b ended failed" in rows[2]["reason"]
+    assert not (out / "points" / "b").exists() and not (out / "points" / "c").exists()
+
+
+def test_a_point_waits_while_its_start_has_not_ended(tmp_path):
+    """b's start a has not ended (not run yet, or a checkpoint another process holds): b is
+    ``busy`` (the driver asks again later) and nothing of b's is written."""
+    from fem_ade.sweep import run_point
+
+    b = load_sweep(_write(tmp_path / "chain.toml", CHAIN)).points()[1]
+    r = run_point(b, str(tmp_path))
+    assert r["status"] == "busy" and r["reason"] == "waits for a to end"
+    assert not (tmp_path / "points").exists()
