@@ -584,20 +584,7 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
     start_ls = start[1] if start is not None else None
     adaptive = AdaptiveDt(**config.adaptive) if config.adaptive else None
     columns = HISTORY_COLUMNS + tuple(be.extra_columns) + (("dt",) if adaptive else ())
-    writer = series = None
-    earlier: list[dict] = []
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        if start is None:
-            write_json_atomic(out / "run.json",
-                              {"scene": scene_to_mapping(scene), **config.to_mapping()})
-            writer = HistoryWriter(out / "history.csv", columns)
-        else:
-            earlier = truncate_history(out / "history.csv", start_ls.k)
-            writer = HistoryWriter(out / "history.csv", columns, append=True)
-        # the ParaView series: the start, every save_every steps, the end
-        series = _Series(out / "phi.xdmf", be, config.save_every,
-                         None if start is None else start_ls.k)
+    writer, series, earlier = _open_outputs(out, scene, config, be, start, columns)
     identity = run_identity(scene, config) if out is not None else None
     observers = [(config.save_every, series.save)] if series else []
     shapes = None
@@ -630,6 +617,38 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
     if out is not None:  # what was computed is written first, before any analysis
         with critical():  # a signal now waits for the run's files
             summary = _write_results(out, be, result, config, series, phi_grid)
+    grid = _analyse(be, result, phi_grid)
+    if out is not None:
+        with critical():
+            _finish(out, be, result, config, summary, grid, rows)
+    return result
+
+
+def _open_outputs(out, scene, config, be, start, columns):
+    """The run folder's writers before the loop (all None without a folder): the history
+    (a new one with run.json, or the one being resumed, cut back to the start), the
+    ParaView series, and the history rows written before the start."""
+    if out is None:
+        return None, None, []
+    earlier: list[dict] = []
+    out.mkdir(parents=True, exist_ok=True)
+    if start is None:
+        write_json_atomic(out / "run.json",
+                          {"scene": scene_to_mapping(scene), **config.to_mapping()})
+        writer = HistoryWriter(out / "history.csv", columns)
+    else:
+        earlier = truncate_history(out / "history.csv", start[1].k)
+        writer = HistoryWriter(out / "history.csv", columns, append=True)
+    # the ParaView series: the start, every save_every steps, the end
+    series = _Series(out / "phi.xdmf", be, config.save_every,
+                     None if start is None else start[1].k)
+    return writer, series, earlier
+
+
+def _analyse(be, result: RunResult, phi_grid: np.ndarray):
+    """Describe the final shape into ``result`` (with its sharp reference unless it
+    diverged); a failure of the analysis is a warning and ``result.analysis_error``, never
+    the run's. Returns the backend's (φ on the grid, surface, descriptors)."""
     grid = (phi_grid, None, None)
     try:
         result.shape, grid = be.describe_final(result.final, grid=phi_grid)
@@ -643,11 +662,8 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
         result.shape = None
         result.analysis_error = f"{type(err).__name__}: {err}"[:500]
         warnings.warn(f"the shape analysis failed ({result.analysis_error}); the run's "
-                      "results are saved", stacklevel=2)
-    if out is not None:
-        with critical():
-            _finish(out, be, result, config, summary, grid, rows)
-    return result
+                      "results are saved", stacklevel=3)
+    return grid
 
 
 def describe_final(be: Backend, final: dict):

@@ -207,7 +207,6 @@ LONG_FUNCTIONS = {
     "fem_ade/run.py:build_parser": (93, "argparse: one option per statement"),
     "fem_ade/sweep.py:load_sweep": (78, "each mistake in a sweep file: its one-line error"),
     "fem_ade/scenes.py:scene_from_mapping": (72, "each mistake in a TOML scene: its error"),
-    "fem_ade/runs.py:_execute_run": (70, "debt: a run's outputs in the order they are safe"),
     "studies/sharp_limit.py:eps_figures": (68, "a matplotlib figure, panel by panel"),
     "fem_ade/render.py:render_history": (68, "a matplotlib figure, panel by panel"),
     "studies/gallery.py:write_report": (65, "debt: a report's tables"),
