@@ -162,19 +162,7 @@ def simulate(
             constraints=constraints, adaptive=adaptive, accelerate=accelerate,
             checkpoint_every=checkpoint_every, save_every=save_every, shape_every=shape_every,
             render=render, backend_options=backend_options)
-    initial = meridian = None
-    if phi0 is not None:
-        if isinstance(phi0, (str, Path)):
-            scene = scene.with_(ic=FieldIC(path=str(Path(phi0).resolve())))
-            scene.ic.check(scene.dim)
-            initial = scene.ic.values()  # kept with the run: it resumes if phi0 moves
-            meridian = scene.ic.meridian()  # an axisymmetric run's: its nodes kept too
-        else:
-            if np.iscomplexobj(phi0):
-                raise ModelError("phi0 must be a real field, got complex values")
-            initial = check_grid_field(phi0, "phi0")
-            scene = scene.with_(ic=FieldIC(grid=initial))
-        scene.ic.check(scene.dim)
+    scene, initial = _start_field(scene, phi0)
     config.check(scene, allow_underresolved=allow_underresolved)
     scene = scene_as_run(scene, config)
     out = check_out_dir(out, force=force) if out is not None else None
@@ -195,13 +183,33 @@ def simulate(
     lock = prepare_out_dir(out, force=force, fresh=fresh)  # ours until the run ends
     try:
         if initial is not None:  # the start field is kept with the run
-            write_fields(out / "initial.npz", {"phi": initial} if meridian is None else
-                         {"phi_grid": initial, **meridian})
+            write_fields(out / "initial.npz", initial)
             scene = scene.with_(ic=FieldIC(path=str((out / "initial.npz").resolve()),
-                                           grid=initial))
+                                           grid=initial.get("phi_grid", initial.get("phi"))))
         return _execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)
     finally:
         lock.release()
+
+
+def _start_field(scene, phi0) -> tuple:
+    """(the scene starting from ``phi0``, the fields its run keeps in initial.npz), or
+    (scene, None) without ``phi0``: a grid field (``phi``), or an axisymmetric run's (its
+    grid ``phi_grid`` and its (r, z) nodes: such a run resumes from them)."""
+    if phi0 is None:
+        return scene, None
+    if isinstance(phi0, (str, Path)):
+        scene = scene.with_(ic=FieldIC(path=str(Path(phi0).resolve())))
+        scene.ic.check(scene.dim)
+        grid = scene.ic.values()  # kept with the run: it resumes if phi0 moves
+        meridian = scene.ic.meridian()
+        initial = {"phi": grid} if meridian is None else {"phi_grid": grid, **meridian}
+    else:
+        if np.iscomplexobj(phi0):
+            raise ModelError("phi0 must be a real field, got complex values")
+        initial = {"phi": check_grid_field(phi0, "phi0")}
+        scene = scene.with_(ic=FieldIC(grid=initial["phi"]))
+    scene.ic.check(scene.dim)
+    return scene, initial
 
 
 #: simulate's keywords that a RunConfig holds (with ``config=``, none may be given)
