@@ -77,10 +77,14 @@ def failure_record(folder: str | Path) -> Path:
     return folder.with_name(folder.name + ".failed.json")
 
 
-def record_failure(folder: str | Path, reason: str, seconds: float | None = None) -> None:
-    """Write the reason a job failed to its :func:`failure_record`."""
+def record_failure(folder: str | Path, reason: str, seconds: float | None = None,
+                   status: str = Status.FAILED) -> None:
+    """Write the reason a job failed (or, ``status`` skipped, was not run) to its
+    :func:`failure_record`."""
     folder = Path(folder)
     record = {"folder": folder.name, "reason": reason}
+    if status != Status.FAILED:
+        record["status"] = str(status)
     if seconds is not None:
         record["seconds"] = round(seconds, 2)
     _write_json(failure_record(folder), record)

@@ -31,6 +31,8 @@ class Status(str, Enum):
     PENDING = "pending"
     #: (a sweep's point) its summary.json cannot be read as a run's
     DAMAGED = "damaged"
+    #: (a sweep's point) not run: its start ended otherwise than it asks (``when``)
+    SKIPPED = "skipped"
 
     __str__ = str.__str__
     __format__ = str.__format__

@@ -43,12 +43,14 @@ steady end kicked to test its stability — is one sweep file::
     [[points]]
     name = "eps=0.02"                     # its folder's name (letters, digits, . _ - =)
     seed = "prolate"                      # vesicle: its branch (default: the first seed)
+    base = "vesicle"                      # (default: the sweep's base)
     scene = {eps = 0.02}                  # over [scene]
     run = {n = 96}                        # over [run]
     [[points]]
     name = "eps=0.01"
     scene = {eps = 0.01}
     after = "eps=0.02"                    # starts from that point's final field
+    when = ["steady"]                     # optional: only after such an end (else skipped)
 
 Dask runs a point only after the one it starts from; if that one ended without a result
 (failed, diverged) the point is recorded as failed, with the reason. A listed point's
@@ -100,7 +102,7 @@ RUN_KEYS = {"recipe": str, "backend": str, "n": int, "dt": float, "steps": int,
             "until_steady": float, "max_steps": int, "every": int, "scheme": str,
             "constraints": str, "accelerate": bool, "perturb": float,
             "checkpoint_every": int, "render": bool, "backend_options": dict,
-            "allow_underresolved": bool, "geometry": str}
+            "allow_underresolved": bool, "geometry": str, "ic": str, "shape_every": int}
 #: the table's columns (the axes' names come first, after ``point``; no timings: a resumed
 #: sweep's table is the uninterrupted one's, and each run's times are in its summary.json)
 COLUMNS = ("seed", "status", "steps", "E", "W", "G", "e", "label", "components", "genus",
@@ -119,9 +121,11 @@ class Point:
     run: dict = field(default_factory=dict)
     #: a branch point's continuation (param, from, to, step, folds), or None: a run
     branch: dict | None = None
-    #: the point whose end it starts from (its name), and that point's identity
+    #: the point whose end it starts from (its name), and that point's identity; the
+    #: statuses of that end it runs after (None: any end with a result)
     after: str | None = None
     start: dict | None = None
+    when: tuple | None = None
 
     def scene(self):
         from .scenes import resolve_scene, vesicle_scene
@@ -154,7 +158,8 @@ class Point:
         if self.branch:  # (absent for a run: the folders of before stay theirs)
             what["branch"] = self.branch
         if self.after:  # a point is also where it starts from
-            what["after"] = {"point": self.after, "identity": self.start}
+            what["after"] = {"point": self.after, "identity": self.start,
+                             **({"when": list(self.when)} if self.when else {})}
         return json.loads(json.dumps(what, sort_keys=True, default=str))
 
     def options(self, scene) -> dict:
@@ -201,9 +206,10 @@ class Sweep:
         for spec in self.listed:
             start = made[spec["after"]].identity() if spec["after"] else None
             made[spec["name"]] = point = Point(
-                spec["name"], self.base, dict(spec["scene"]),
+                spec["name"], spec.get("base", self.base), dict(spec["scene"]),
                 {k: v for k, v in self.fixed.items() if k not in spec["scene"]},
-                spec["seed"], {**self.run, **spec["run"]}, after=spec["after"], start=start)
+                spec["seed"], {**self.run, **spec["run"]}, after=spec["after"], start=start,
+                when=tuple(spec["when"]) if spec.get("when") else None)
             out.append(point)
         return out
 
@@ -329,7 +335,7 @@ def _run_table(run, where: str) -> dict:
 
 
 #: a listed point's keys
-POINT_KEYS = ("name", "seed", "scene", "run", "after")
+POINT_KEYS = ("name", "base", "seed", "scene", "run", "after", "when")
 
 
 def _listed(points, base: str, seeds: list, axes: dict) -> list[dict]:
@@ -356,6 +362,9 @@ def _listed(points, base: str, seeds: list, axes: dict) -> list[dict]:
         where = f"[[points]] {name}"
         if name in names:
             raise ModelError(f"{where}: a point of that name is already in the sweep")
+        own = table.get("base", base)
+        if not isinstance(own, str):
+            raise ModelError(f"{where}: base must be a scene name, got {own!r}")
         seed = table.get("seed", seeds[0])
         if str(seed) not in map(str, seeds):
             raise ModelError(f"{where}: seed {seed!r} is not one of the sweep's seeds "
@@ -363,13 +372,14 @@ def _listed(points, base: str, seeds: list, axes: dict) -> list[dict]:
         scene = table.get("scene", {})
         if not isinstance(scene, dict):
             raise ModelError(f"{where}: scene must be a table")
-        _scene_keys(base, scene, f"{where}: scene")
+        _scene_keys(own, scene, f"{where}: scene")
         after = table.get("after")
         if after is not None and after not in names:
             raise ModelError(f"{where}: after = {after!r} names no point before it (a grid "
                              "point or one listed above)")
-        out.append({"name": name, "seed": seed, "scene": dict(scene),
-                    "run": _run_table(table.get("run", {}), where), "after": after})
+        out.append({"name": name, "base": own, "seed": seed, "scene": dict(scene),
+                    "run": _run_table(table.get("run", {}), where), "after": after,
+                    "when": _when(table.get("when"), after, where)})
         names.add(name)
     return out
 
@@ -416,6 +426,21 @@ def _branch_table(table, fixed: dict, axes: dict, run: dict) -> dict | None:
                          f"only {', '.join(BRANCH_RUN_KEYS)} (each point is Newton's "
                          "continuation, not a run)")
     return out
+
+
+def _when(when, after, where: str) -> list | None:
+    """A listed point's ``when``: the end statuses of its start it runs after."""
+    if when is None:
+        return None
+    from .status import HAS_RESULT
+
+    valid = sorted(str(s) for s in HAS_RESULT)
+    if after is None:
+        raise ModelError(f"{where}: when needs after (the point whose end it starts from)")
+    if not isinstance(when, list) or not when or any(w not in valid for w in when):
+        raise ModelError(f"{where}: when must be a list of the statuses {', '.join(valid)}, "
+                         f"got {when!r}")
+    return when
 
 
 def check_sweep(sweep: Sweep) -> None:
@@ -512,7 +537,8 @@ def run_point(point: Point, root: str, *started) -> dict:
 def _start(point: Point, root: Path) -> Path | dict | None:
     """The run folder a point starts from (``after``), None without one, or the point's row
     when it cannot start: ``busy`` while its start has not ended (the driver asks again),
-    ``failed`` with the reason when its start ended without a result."""
+    ``failed`` with the reason when its start ended without a result, ``skipped`` when it
+    ended otherwise than ``when`` asks (looked at again on the next run of the sweep)."""
     if point.after is None:
         return None
     from .jobs import status_of
@@ -523,15 +549,33 @@ def _start(point: Point, root: Path) -> Path | dict | None:
         return root / "points" / point.after
     start = root / "points" / point.after
     out = {"point": point.name, **point.values, "seed": point.seed, "after": point.after}
-    status = Status.FAILED if failure_record(start).is_file() else status_of(start)
+    status = _record_status(start) or status_of(start)
+    if status in HAS_RESULT and point.when and status not in point.when:
+        reason = (f"not run: its start {point.after} ended {status}; it runs after "
+                  f"{' or '.join(point.when)}")
+        _write_json(folder.with_name(point.name + ".point.json"), point.identity())
+        record_failure(folder, reason, status=Status.SKIPPED)
+        return {**out, "status": Status.SKIPPED, "reason": reason}
     if status in HAS_RESULT:
         return start
-    if status in ENDED | {Status.FAILED}:
-        reason = f"its start {point.after} ended {status}: there is no field to start from"
+    if status in ENDED | {Status.FAILED, Status.SKIPPED}:
+        how = "was skipped" if status == Status.SKIPPED else f"ended {status}"
+        reason = f"its start {point.after} {how}: there is no field to start from"
         _write_json(folder.with_name(point.name + ".point.json"), point.identity())
         record_failure(folder, reason)
         return {**out, "status": Status.FAILED, "reason": reason}
     return {**out, "status": Status.BUSY, "reason": f"waits for {point.after} to end"}
+
+
+def _record_status(folder: Path) -> str | None:
+    """The status a failure record gives the folder (failed, or skipped), or None."""
+    path = failure_record(folder)
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text()).get("status", Status.FAILED)
+    except (OSError, ValueError, AttributeError):
+        return Status.FAILED
 
 
 def _follow(point: Point, folder: Path) -> None:
@@ -604,16 +648,29 @@ def check_out(out: Path) -> None:
         raise ModelError(f"cannot make --out {out}: {parent} is not a writable folder")
 
 
+#: Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in each worker it starts. An explicit trim
+#: threshold turns off glibc's dynamic mmap threshold, so that every array above 128 KiB is
+#: mapped and unmapped anew, page faults and all: a point of the axisymmetric ε ladder (105 x
+#: 257 nodes, 230 steps) took 6.0 s of CPU in a worker against 1.56 s without it (1.4-1.7 s
+#: in the driver's own process); the same in one process with the variable set, 5.9-6.4 s.
+#: The workers of a LocalCluster are started without it (docs/cluster.md: external workers)
+NANNY_ENVIRON = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+
+
 def connect(scheduler: str | None, workers: int):
     """(client, cluster or None): a LocalCluster of ``workers`` processes, or a client of the
     scheduler at ``scheduler`` (an address, or a scheduler file) within 10 s; ModelError
     (one line) for an address that does not answer, resolve or parse, or a file that is no
     scheduler's."""
+    import dask
     from dask.distributed import Client, LocalCluster
 
     if scheduler is None:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=":0", silence_logs=40)
+        if os.environ.get("MALLOC_TRIM_THRESHOLD_") == "65536":  # a Dask nanny's, left in this
+            del os.environ["MALLOC_TRIM_THRESHOLD_"]              # process: workers inherit it
+        with dask.config.set(NANNY_ENVIRON):
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=40)
         return Client(cluster), cluster
     if not scheduler.strip():
         raise ModelError("--scheduler needs an address (tcp://HOST:PORT) or a scheduler file")
@@ -668,7 +725,7 @@ def row(point: Point, root: Path) -> dict:
     failed = failure_record(folder)
     if failed.is_file():
         rec = json.loads(failed.read_text())
-        return {**out, "status": Status.FAILED, "reason": rec["reason"]}
+        return {**out, "status": rec.get("status", Status.FAILED), "reason": rec["reason"]}
     try:
         s = json.loads((folder / "summary.json").read_text())
     except (OSError, ValueError):
@@ -908,12 +965,7 @@ def main(argv=None) -> int:
         sweep = load_sweep(args.sweep)
         out = Path(args.out or Path("runs") / "sweeps" / sweep.name)
         if args.report_only:
-            if not (out / "sweep.json").is_file():
-                raise ModelError(f"{out} holds no sweep to report on (run it first)")
-            check_points(sweep, out, rerun_changed=False)
-            points = sweep.points()
-            rows = [row(p, out) for p in points]
-            write_table(rows, out / "sweep.csv", sweep.columns())
+            rows = report_rows(sweep, out)
         else:
             rows = run_sweep(sweep, out, workers=args.workers, scheduler=args.scheduler,
                              quiet=args.quiet, retry_failed=args.retry_failed,
@@ -931,11 +983,28 @@ def main(argv=None) -> int:
     from .sweep_plot import draw
 
     pictures = [] if sweep.branch else draw(rows, sweep, out)  # each branch draws its own
+    return _say_ended(sweep, rows, out, pictures)
+
+
+def report_rows(sweep: Sweep, out: Path) -> list[dict]:
+    """``--report-only``: the rows from the folders (sweep.csv written again), nothing run."""
+    if not (out / "sweep.json").is_file():
+        raise ModelError(f"{out} holds no sweep to report on (run it first)")
+    check_points(sweep, out, rerun_changed=False)
+    rows = [row(p, out) for p in sweep.points()]
+    write_table(rows, out / "sweep.csv", sweep.columns())
+    return rows
+
+
+def _say_ended(sweep: Sweep, rows: list[dict], out: Path, pictures: list) -> int:
+    """The sweep's last line; its exit code (1 while a point has not ended)."""
     done = sum(r["status"] in ENDED for r in rows)
     bad = sum(r["status"] == Status.FAILED for r in rows)
-    print(f"{sweep.name}: {done} of {len(rows)} points finished, {bad} failed; "
-          f"{out / 'sweep.csv'}" + "".join(f", {p}" for p in pictures))
-    return 0 if done + bad == len(rows) else 1
+    skipped = sum(r["status"] == Status.SKIPPED for r in rows)
+    print(f"{sweep.name}: {done} of {len(rows)} points finished, {bad} failed"
+          + (f", {skipped} skipped" if skipped else "") + f"; {out / 'sweep.csv'}"
+          + "".join(f", {p}" for p in pictures))
+    return 0 if done + bad + skipped == len(rows) else 1
 
 
 if __name__ == "__main__":

@@ -58,7 +58,8 @@ def external(workers: int, folder: Path):
     """A scheduler and ``workers`` worker processes started as on a cluster's nodes; returns
     (address, processes, start-up seconds)."""
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-           "FEM_ADE_FFT_WORKERS": "1"}
+           "FEM_ADE_FFT_WORKERS": "1",  # and the workers' Dask settings (docs/cluster.md)
+           "DASK_CONFIG": str(Path(__file__).resolve().parent / "sweeps" / "dask")}
     dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
     file = folder / "scheduler.json"
     t0 = time.perf_counter()

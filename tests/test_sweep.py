@@ -176,7 +176,8 @@ def test_slurm_config(tmp_path, monkeypatch):
     script = module.main(["--print-script"])
     for line in ("#SBATCH --cpus-per-task=2", "#SBATCH -t 04:00:00", "#SBATCH --mem=8G",
                  "source .venv/bin/activate", "FEM_ADE_FFT_WORKERS=1", "--nthreads 1",
-                 "--nworkers 2", "distributed.cli.dask_worker"):
+                 "--nworkers 2", "distributed.cli.dask_worker",
+                 "DASK_CONFIG=studies/sweeps/dask"):
         assert line in script, line
 
 
@@ -506,3 +507,45 @@ def test_a_point_waits_while_its_start_has_not_ended(tmp_path):
     r = run_point(b, str(tmp_path))
     assert r["status"] == "busy" and r["reason"] == "waits for a to end"
     assert not (tmp_path / "points").exists()
+
+
+def test_a_point_runs_only_after_the_end_it_asks_for(tmp_path, capsys):
+    """b asks for a steady start (``when``); a ends at max_steps: b is skipped with the
+    reason (not failed, not run), the sweep ends with exit code 0; c after b fails."""
+    text = CHAIN.replace('after = "a"\n', 'after = "a"\nwhen = ["steady"]\n')
+    path, out = _write(tmp_path / "w.toml", text), tmp_path / "out"
+    assert main([str(path), "--out", str(out), "--quiet"]) == 0
+    assert "1 failed, 1 skipped" in capsys.readouterr().out
+    rows = {r["point"]: r for r in read_table(out / "sweep.csv")}
+    assert rows["a"]["status"] == "max_steps" and rows["b"]["status"] == "skipped"
+    assert rows["b"]["reason"] == "not run: its start a ended max_steps; it runs after steady"
+    assert rows["c"]["status"] == "failed" and "its start b was skipped" in rows["c"]["reason"]
+    assert not (out / "points" / "b").exists()
+    bad = _write(tmp_path / "bad.toml", text.replace('when = ["steady"]', 'when = ["busy"]'))
+    assert main([str(bad), "--out", str(tmp_path / "o2"), "--quiet"]) == 2
+    assert "when must be a list of the statuses" in capsys.readouterr().err
+
+
+def _worker_environ(key: str):
+    return os.environ.get(key)
+
+
+def test_sweep_workers_keep_the_dynamic_mmap_threshold():
+    """A sweep's LocalCluster starts its workers without Dask's MALLOC_TRIM_THRESHOLD_ (it
+    made an axisymmetric point 4x slower); a LocalCluster with Dask's defaults, the control,
+    sets it."""
+    from dask.distributed import Client, LocalCluster
+
+    from fem_ade.sweep import connect
+
+    os.environ.pop("MALLOC_TRIM_THRESHOLD_", None)  # (a nanny sets it in its own process too)
+    client, cluster = connect(None, 1)
+    try:
+        assert client.submit(_worker_environ, "MALLOC_TRIM_THRESHOLD_").result() is None
+    finally:
+        client.close()
+        cluster.close()
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address=":0", silence_logs=40) as control, Client(control) as c:
+        assert c.submit(_worker_environ, "MALLOC_TRIM_THRESHOLD_").result() == "65536"
+    os.environ.pop("MALLOC_TRIM_THRESHOLD_", None)
