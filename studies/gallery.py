@@ -28,18 +28,25 @@ with another smooth perturbation (0.05, seed 2) and run to a steady state again 
 it is stable if the kick returns to the same label and E (to 1e-4), else the kick's end is
 reported too.
 
+The runs are one sweep (:mod:`fem_ade.sweep`): each case a listed point — the paper's
+scene with its variant's changes and run options (:func:`point_spec`) — and each kick a
+point that starts from its case's end (``after``), run on a local Dask cluster of
+``--workers`` processes (default 2, one thread each). Resumable: a finished run is skipped,
+an interrupted one resumes from its checkpoint, a failed one is recorded with its reason
+(``NAME.failed.json``), a folder made with other settings is refused.
+
 Results in ``--out`` (default ``runs/gallery``; the committed gallery is
 ``studies/results/gallery/``, and only a report into it updates ``fem_ade/verdicts.json``,
-which ``python -m fem_ade.run --list`` reads): one folder per run (``runs/VARIANT/BACKEND/SCENE``
-with summary.json, history.csv, shapes.csv, shape.png, analysis.json, and ``kick/``; not
-committed: the analyses are kept in ``analyses.json`` and the pictures as ``thumbs/``, from
-which ``--report-only`` rebuilds the report without the folders), the
-table ``gallery.md``, a montage per backend (``montage-BACKEND.png``: rows are scenes,
-columns variants) and the phase diagram ``phase-diagram.png``. Resumable: a finished run is
-skipped, an interrupted one resumes from its checkpoint; large files (final.npz, series,
-checkpoints) are deleted once a case is analysed (``--keep`` keeps them). ``--scenes``,
-``--backend`` and ``--variants`` choose what runs; the report always covers every run
-analysed in the results folder.
+which ``python -m fem_ade.run --list`` reads): the sweep's folder ``sweep/`` (a run folder
+per case, ``points/VARIANT_BACKEND_SCENE``, with summary.json, history.csv, shapes.csv,
+shape.png and analysis.json, and ``…_kick`` beside it; not committed: the analyses are kept
+in ``analyses.json`` and the pictures as ``thumbs/``, from which ``--report-only`` rebuilds
+the report without the folders), the table ``gallery.md``, a montage per backend
+(``montage-BACKEND.png``: rows are scenes, columns variants) and the phase diagram
+``phase-diagram.png``. Large files (final.npz, series, checkpoints) are deleted once a case
+and its kick are analysed (``--keep`` keeps them). ``--scenes``, ``--backend`` and
+``--variants`` choose what runs; the report always covers every run analysed in the results
+folder.
 
     python studies/gallery.py                                # everything (hours)
     python studies/gallery.py --backend spectral --variants a b
@@ -53,14 +60,15 @@ import argparse
 import json
 import math
 import os
-import time
 from pathlib import Path
 
 import numpy as np
 
 from fem_ade.jobs import status_of
+from fem_ade.lock import FolderBusy
+from fem_ade.model import ModelError
 from fem_ade.render import compact_png, save_figure
-from fem_ade.status import Status
+from fem_ade.status import ENDED, Status
 
 #: the committed gallery (its verdicts also go to fem_ade/verdicts.json when it is --out)
 RESULTS = Path(__file__).resolve().parent / "results" / "gallery"
@@ -129,35 +137,72 @@ def fem_order(backend: str) -> int | None:
     return None
 
 
+def scene_changes(case: dict) -> dict:
+    """What the case's variant changes in the paper's scene: the localized volume functional
+    (``b-loc``, ``c-loc``), ε halved with ΔA₀ (``d``: D = 2ε/3 follows, the same Δa₀)."""
+    if case["variant"] in ("b-loc", "c-loc"):
+        return {"volume_functional": "localized"}
+    if case["variant"] == "d":
+        from fem_ade.scenes import PAPER_SCENES
+
+        p = PAPER_SCENES[case["scene"]].params
+        return {"eps": p.eps / 2, "delta_A0": p.delta_A0 / 2}
+    return {}
+
+
 def scene_for(case: dict):
     from fem_ade.scenes import PAPER_SCENES
 
-    scene = PAPER_SCENES[case["scene"]]
-    if case["variant"] in ("b-loc", "c-loc"):
-        scene = scene.with_(volume_functional="localized")
-    if case["variant"] == "d":  # ε halved; D = 2ε/3 follows, ΔA₀ with it (same Δa₀)
-        p = scene.params
-        scene = scene.with_(eps=p.eps / 2, delta_A0=p.delta_A0 / 2)
-    return scene
+    return PAPER_SCENES[case["scene"]].with_(**scene_changes(case))
+
+
+#: the run folders: one fem_ade.sweep folder (``OUT/sweep/points/VARIANT_BACKEND_SCENE`` and
+#: ``…_kick``; not committed)
+SWEEP_DIR = "sweep"
+
+
+def point_name(variant: str, backend: str, name: str) -> str:
+    return f"{variant}_{backend}_{name}"
 
 
 def run_dir(root: Path, variant: str, backend: str, name: str) -> Path:
-    return root / "runs" / variant / backend / name
+    return root / SWEEP_DIR / "points" / point_name(variant, backend, name)
 
 
 def case_dir(root: Path, case: dict) -> Path:
     return run_dir(root, case["variant"], case["backend"], case["scene"])
 
 
+def kick_dir(folder: Path) -> Path:
+    """The run folder of the kick of the run in ``folder``."""
+    return folder.with_name(folder.name + "_kick")
 
 
-def _run(scene, folder: Path, kwargs: dict, quiet: bool, after: Path | None = None):
-    """The run in ``folder`` made to exist (:func:`fem_ade.jobs.ensure`: skipped if it
-    finished, resumed, started again if its checkpoint is not resumable); a failure raises."""
-    from fem_ade.jobs import ensure
+def point_spec(case: dict) -> dict:
+    """The case as a listed point of a sweep (:mod:`fem_ade.sweep`): the paper's scene with
+    the variant's changes, its run options, its perturbation's seed."""
+    run = dict(case["kwargs"], render=True)
+    return {"name": point_name(case["variant"], case["backend"], case["scene"]),
+            "base": case["scene"], "seed": run.pop("seed", 0), "scene": scene_changes(case),
+            "run": run, "after": None}
 
-    return ensure(folder, scene, options=dict(kwargs, render=True), after=after, quiet=quiet,
-                  restart=True).check()
+
+def kick_spec(spec: dict) -> dict:
+    """The kick of a case's point: from its end, if that is steady, perturbed by ``KICK``,
+    to a steady state."""
+    return {**spec, "name": spec["name"] + "_kick", "seed": KICK[1],
+            "run": {**spec["run"], "perturb": KICK[0], "ic": "consistent"},
+            "after": spec["name"], "when": [Status.STEADY.value]}
+
+
+def as_sweep(specs: list[dict]):
+    """The listed points as one sweep, checked (:func:`fem_ade.sweep.check_sweep`)."""
+    from fem_ade.sweep import Sweep, check_sweep
+
+    sweep = Sweep("gallery", specs[0]["base"], {}, {}, [0, PERTURB[1], KICK[1]], {},
+                  listed=specs)
+    check_sweep(sweep)
+    return sweep
 
 
 def far_field(phi: np.ndarray, L: float, eps: float, far: float = 6.0) -> float:
@@ -231,48 +276,73 @@ def slim(folder: Path) -> None:
             pass
 
 
-def _stop_if_interrupted(folder: Path) -> None:
-    """A run stopped by a signal (Ctrl-C) keeps its checkpoint for the next sitting: it is
-    not analysed or slimmed, and the gallery stops."""
-    if status_of(folder) == Status.INTERRUPTED:
-        print(f"  {folder}: interrupted; `studies/gallery.py` resumes it", flush=True)
-        raise KeyboardInterrupt
-
-
-def run_case(root: Path, case: dict, *, quiet: bool, keep: bool) -> dict:
-    """Run one case (and its kick) unless it is finished: analysed in its folder or kept in
-    the archive (a run whose folder is gone is not run again; remove its archive entry to)."""
+def _archived(root: Path, case: dict, kept: dict) -> dict | None:
+    """The case's analysis if it is finished: analysed in its folder (with its kick's, when
+    it has one), or kept in the archive with its folder gone (it is not run again; remove its
+    archive entry to); None otherwise."""
     folder = case_dir(root, case)
-    scene = scene_for(case)
-    kept = json.loads((root / ARCHIVE).read_text()) if (root / ARCHIVE).is_file() else {}
     entry = kept.get(_key(case["variant"], case["backend"], case["scene"]))
     if entry is not None and not (folder / "analysis.json").is_file() and (
             case["variant"] == "a" or entry.get("status") != Status.STEADY or "kick" in entry):
         return {k: v for k, v in entry.items() if k != "kick"}
     if (folder / "analysis.json").is_file() and (
-            case["variant"] == "a" or (folder / "kick" / "analysis.json").is_file()):
+            case["variant"] == "a" or (kick_dir(folder) / "analysis.json").is_file()
+            or json.loads((folder / "analysis.json").read_text())["status"] != Status.STEADY):
         return json.loads((folder / "analysis.json").read_text())
-    t0 = time.perf_counter()
-    _run(scene, folder, case["kwargs"], quiet)
-    _stop_if_interrupted(folder)
+    return None
+
+
+def run_cases(root: Path, cases: list[dict], kept: dict, *, workers: int, quiet: bool,
+              scheduler: str | None = None) -> None:
+    """The unfinished cases and their kicks as one sweep on Dask (``workers`` processes:
+    resumable, each run once; a kick runs once its case has ended, if it ended steady)."""
+    from fem_ade.sweep import run_sweep
+
+    todo = [c for c in cases if _archived(root, c, kept) is None]
+    if todo:
+        specs = [point_spec(c) for c in todo]
+        kicks = [kick_spec(s) for c, s in zip(todo, specs, strict=True) if c["variant"] != "a"]
+        run_sweep(as_sweep(specs + kicks), root / SWEEP_DIR, workers=workers, quiet=quiet,
+                  scheduler=scheduler)
+
+
+def finish_case(root: Path, case: dict, kept: dict, *, keep: bool) -> dict | None:
+    """The case's analysis (and its kick's), its large files then deleted unless ``keep``;
+    None (and a line saying why) for a case that failed. A run stopped by a signal keeps its
+    checkpoint for the next sitting: it is not analysed or slimmed, and the gallery stops."""
+    from fem_ade.jobs import failure_record
+
+    done = _archived(root, case, kept)
+    if done is not None:
+        return done
+    folder, scene = case_dir(root, case), scene_for(case)
+    what = f"{case['variant']:5s} {case['backend']:8s} {case['scene']:16s}"
+    kick = kick_dir(folder)
+    kicked = case["variant"] != "a" and status_of(folder) == Status.STEADY
+    runs = (folder, kick) if kicked else (folder,)
+    for run in runs:
+        if failure_record(run).is_file():
+            print(f"{what} FAILED: {json.loads(failure_record(run).read_text())['reason']}",
+                  flush=True)
+            return None
+    for run in runs:
+        if status_of(run) not in ENDED:
+            print(f"  {run}: {status_of(run) or 'not run'}; `studies/gallery.py` resumes it",
+                  flush=True)
+            raise KeyboardInterrupt
     result = analyse(folder, scene)
-    if case["variant"] != "a" and result["status"] == Status.STEADY:
-        kick = folder / "kick"
-        kw = dict(case["kwargs"], perturb=KICK[0], seed=KICK[1], ic="consistent")
-        _run(scene, kick, kw, quiet, after=folder)
-        _stop_if_interrupted(kick)
+    if kicked:
         analyse(kick, scene)
-        if not keep:
-            slim(kick)
     if not keep:
-        slim(folder)
-    print(f"{case['variant']:5s} {case['backend']:8s} {case['scene']:16s} {result['status']:9s}"
-          f" {result['steps']:6d} steps  {result['shape']['label'] if result['shape'] else '-':14s}"
-          f" E {result['final']['E']:.6g}  ({time.perf_counter() - t0:.0f} s)", flush=True)
+        for run in runs:
+            slim(run)
+    print(f"{what} {result['status']:9s} {result['steps']:6d} steps  "
+          f"{result['shape']['label'] if result['shape'] else '-':14s}"
+          f" E {result['final']['E']:.6g}  ({result['wall_s']:.0f} s)", flush=True)
     return result
 
 
-def main(argv=None) -> dict:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default=str(OUT), help="results folder (default %(default)s)")
     ap.add_argument("--scenes", nargs="*", default=None)
@@ -285,15 +355,26 @@ def main(argv=None) -> dict:
     ap.add_argument("--quick", action="store_true", help="tiny grids and runs (also when CI)")
     ap.add_argument("--report-only", action="store_true")
     ap.add_argument("--keep", action="store_true", help="keep fields, series and checkpoints")
-    ap.add_argument("--verbose", action="store_true", help="progress bars")
+    ap.add_argument("--verbose", action="store_true", help="the sweep's progress")
+    ap.add_argument("--workers", type=int, default=2,
+                    help="runs at once (Dask worker processes, one thread each; default 2)")
+    ap.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                    help="run on this Dask scheduler instead (tcp://HOST:PORT or its scheduler "
+                    "file; docs/cluster.md)")
     ap.add_argument("--max-steps", type=int, default=MAX_STEPS,
                     help="cap of the steady-state runs (default %(default)s); a run that "
                     "reaches it is reported as not converged")
     ap.add_argument("--steps-a", type=int, default=None,
                     help="steps of the paper's recipe (variant a; default 20000); a finished "
                     "run keeps its own count, which the table shows")
+    return ap
+
+
+def main(argv=None) -> dict:
+    ap = _parser()
     args = ap.parse_args(argv)
-    for flag, value in (("--max-steps", args.max_steps), ("--steps-a", args.steps_a)):
+    for flag, value in (("--max-steps", args.max_steps), ("--steps-a", args.steps_a),
+                        ("--workers", args.workers)):
         if value is not None and value < 1:
             ap.error(f"{flag} must be a positive integer, got {value}")
     from fem_ade.scenes import PAPER_SCENES
@@ -307,23 +388,34 @@ def main(argv=None) -> dict:
     extra = [f"fem-p{args.fem_order}"] if args.fem_order else []
     cases = plan(names, backends + extra, args.variants, quick, args.max_steps, args.steps_a)
     kept = json.loads((root / ARCHIVE).read_text()) if (root / ARCHIVE).is_file() else {}
-    results = {}
-    for case in cases:
-        key = (case["variant"], case["backend"], case["scene"])
-        if args.report_only:
-            a = _load(root, *key, kept)
+    results, failed = {}, 0
+    try:
+        if not args.report_only:
+            run_cases(root, cases, kept, workers=args.workers, quiet=not args.verbose,
+                      scheduler=args.scheduler)
+        for case in cases:
+            key = (case["variant"], case["backend"], case["scene"])
+            if args.report_only:
+                a = _load(root, *key, kept)
+                if a is not None:
+                    results[key] = {k: v for k, v in a.items() if k not in ("folder", "kick")}
+                continue
+            a = finish_case(root, case, kept, keep=args.keep)
+            failed += a is None
             if a is not None:
-                results[key] = {k: v for k, v in a.items() if k not in ("folder", "kick")}
-            continue
-        try:
-            results[key] = run_case(root, case, quiet=not args.verbose, keep=args.keep)
-        except KeyboardInterrupt:
-            print("gallery interrupted: finished runs are kept, the interrupted one resumes "
-                  "from its checkpoint next time", flush=True)
-            raise SystemExit(130) from None
+                results[key] = a
+    except KeyboardInterrupt:
+        print("gallery interrupted: finished runs are kept, an interrupted one resumes "
+              "from its checkpoint next time", flush=True)
+        raise SystemExit(130) from None
+    except (ModelError, FolderBusy) as err:  # a changed run folder, a scheduler, a lock
+        ap.exit(2, f"gallery: error: {err}\n")
     report = write_report(root, names, backends, args.variants, quick=quick)
     if extra:
         report["pairs"] = write_pairs(root, extra[0])
+    if failed:
+        raise SystemExit(f"gallery: {failed} case(s) failed (their reasons above); the report "
+                         "shows the others")
     return {"results": results, "report": report}
 
 
@@ -371,7 +463,7 @@ def write_pairs(root: Path, backend: str) -> dict:
 # ---------------------------------------------------------------------------------------
 #: what a reader of the gallery needs, kept beside the report: every run's analysis (and its
 #: kick's) in one file, and a thumbnail of each run's picture; the run folders themselves
-#: (``runs/``) are regenerated on demand and not committed
+#: (``sweep/``) are regenerated on demand and not committed
 ARCHIVE, THUMBS = "analyses.json", "thumbs"
 THUMB_WIDTH = 420
 
@@ -410,7 +502,8 @@ def archive(root: Path) -> dict:
     old = json.loads(path.read_text()) if path.is_file() else {}
     entries = {k: _compact(a) for k, a in old.items()}
     changed = entries != old
-    backends = sorted({p.name for p in (root / "runs").glob("*/*") if p.is_dir()})
+    backends = sorted({p.name.split("_")[1] for p in (root / SWEEP_DIR / "points").glob("*_*_*")
+                       if p.is_dir()})
     for v in VARIANTS:
         for b in backends:
             for n in PAPER_SCENES:
@@ -418,7 +511,7 @@ def archive(root: Path) -> dict:
                 if not (folder / "analysis.json").is_file():
                     continue
                 a = json.loads((folder / "analysis.json").read_text())
-                kick = folder / "kick" / "analysis.json"
+                kick = kick_dir(folder) / "analysis.json"
                 if kick.is_file():
                     a["kick"] = json.loads(kick.read_text())
                 a = _compact(a)
@@ -449,7 +542,7 @@ def _load(root: Path, variant: str, backend: str, name: str,
     path = folder / "analysis.json"
     if path.is_file():
         a = json.loads(path.read_text())
-        kick = folder / "kick" / "analysis.json"
+        kick = kick_dir(folder) / "analysis.json"
         if kick.is_file():
             a["kick"] = json.loads(kick.read_text())
         a["folder"] = str(folder)

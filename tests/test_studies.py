@@ -210,7 +210,7 @@ def check_gallery(result, out):
     import shutil
 
     assert (out / "analyses.json").is_file() and list((out / "thumbs").glob("*.png"))
-    shutil.rmtree(out / "runs")
+    shutil.rmtree(out / "sweep")
     again = gallery.main(["--quick", "--report-only", "--scenes", "torus", "--out", str(out)])
     assert again["report"]["verdicts"] == verdicts
     assert (out / "montage-spectral.png").is_file()
@@ -240,11 +240,33 @@ def check_regenerate(result, out):
     assert all("--out studies/results" in line for line in result.values()), result
     from fem_ade.sweep import load_sweep
 
-    listed = _load(STUDIES / "regenerate.py").SWEEP_FILES
+    listed = _load(STUDIES / "regenerate.py").SWEEPS
     for name, files in listed.items():  # each listed sweep file is one that loads
         assert name in result and all(f in result[name] for f in files)
         for f in files:
-            assert load_sweep(STUDIES.parent / f).points()
+            if f.endswith(".toml"):
+                assert load_sweep(STUDIES.parent / f).points()
+
+
+def check_eps_ladder(result, out):
+    """The quick ladder: ε = 0.08 from the seed; 0.04 from the seed, from 0.08's end as it is
+    (its start field is that end's, node for node) and re-profiled (tanh(2 artanh φ) of it);
+    the rows archived before the report, which has a row per ε."""
+    import json
+
+    assert [r["eps"] for r in result] == [0.08, 0.04]
+    assert set(result[1]) == {"eps", "seed", "from 2ε", "re-profiled", "re-seeded", "own shape"}
+    root = out / "eps_ladder-quick"
+    assert json.loads((root / "ladder.json").read_text())["rows"] == result
+    with np.load(root / "points" / "eps=0.08_seed=prolate" / "final.npz") as z:
+        end = np.array(z["phi"])
+    with np.load(root / "points" / "from-2eps_eps=0.04" / "initial.npz") as z:
+        assert np.array_equal(z["phi"], end)
+    with np.load(root / "reprofiled" / "eps=0.04_seed=prolate.start.npz") as z:
+        assert np.allclose(z["phi"], np.tanh(2.0 * np.arctanh(np.clip(end, -1 + 1e-15,
+                                                                        1 - 1e-15))))
+    text = (out / "eps_ladder-quick.md").read_text()
+    assert "| 0.08 | " in text and "| 0.04 | " in text
 
 
 def check_sharp_limit(result, out):
@@ -382,25 +404,50 @@ def test_gallery_plan():
         assert half.reduced_targets() == pytest.approx(base.reduced_targets(), rel=1e-12)
 
 
-def test_gallery_keeps_an_interrupted_run(tmp_path, monkeypatch):
+def test_gallery_keeps_an_interrupted_run(tmp_path):
     """A run stopped by Ctrl-C is not analysed or slimmed (its checkpoint stays for the next
-    sitting): the gallery stops instead."""
+    sitting): the gallery stops instead; a failed one is reported with its reason and
+    left out; a kick skipped because its case did not end steady is not looked at."""
     import json
+
+    from fem_ade.jobs import record_failure
 
     gallery = _load(STUDIES / "gallery.py")
     case = gallery.plan(["discocyte"], ["spectral"], ["b"], quick=True)[0]
     folder = gallery.case_dir(tmp_path, case)
-
-    def stopped_run(scene, where, kwargs, quiet):
-        where.mkdir(parents=True, exist_ok=True)
-        (where / "summary.json").write_text(json.dumps({"status": "interrupted"}))
-        (where / "checkpoint.npz").write_bytes(b"x")
-
-    monkeypatch.setattr(gallery, "_run", stopped_run)
+    folder.mkdir(parents=True)
+    (folder / "summary.json").write_text(json.dumps({"status": "interrupted"}))
+    (folder / "checkpoint.npz").write_bytes(b"x")
     with pytest.raises(KeyboardInterrupt):
-        gallery.run_case(tmp_path, case, quiet=True, keep=False)
+        gallery.finish_case(tmp_path, case, {}, keep=False)
     assert (folder / "checkpoint.npz").is_file()
     assert not (folder / "analysis.json").exists()
+    (folder / "summary.json").write_text(json.dumps({"status": "steady"}))
+    record_failure(gallery.kick_dir(folder), "ModelError: made to fail")
+    assert gallery.finish_case(tmp_path, case, {}, keep=False) is None
+    assert (folder / "checkpoint.npz").is_file()
+
+
+def test_gallery_is_one_sweep_of_listed_points():
+    """Every case is a listed point of the paper's scene with its variant's changes and
+    options; every case but the paper's recipe (a) has a kick after it, when it is steady."""
+    gallery = _load(STUDIES / "gallery.py")
+    cases = gallery.plan(["discocyte", "torus"], ["spectral", "fem"], gallery.VARIANTS,
+                         quick=True)
+    specs = [gallery.point_spec(c) for c in cases]
+    kicks = [gallery.kick_spec(s) for c, s in zip(cases, specs, strict=True) if c["variant"] != "a"]
+    sweep = gallery.as_sweep(specs + kicks)
+    points = {p.name: p for p in sweep.points()}
+    assert len(points) == len(cases) + len(kicks)
+    for c in cases:
+        point = points[gallery.point_name(c["variant"], c["backend"], c["scene"])]
+        assert point.scene() == gallery.scene_for(c)
+        assert point.options(point.scene())["n"] == c["kwargs"]["n"]
+    kick = points["d_spectral_torus_kick"]
+    assert kick.after == "d_spectral_torus" and kick.when == ("steady",)
+    assert kick.options(kick.scene())["perturb"] == gallery.KICK[0]
+    assert points["d_spectral_torus"].scene().params.eps == pytest.approx(
+        gallery.scene_for({"variant": "b", "scene": "torus"}).params.eps / 2)
 
 
 def test_package_verdicts_are_the_committed_gallerys():
@@ -418,7 +465,7 @@ def test_package_verdicts_are_the_committed_gallerys():
 #: are not committed: each finished run is skipped, each cached row read), with the arguments
 #: that made it; phase_diagram's (30 s of sharp solves) runs with -m slow
 REPORTS = {"constraints_study": [], "sharp_limit": [], "gallery": [], "ade_plane": [],
-           "axisymmetric": [], "nonaxisymmetric": ["--eps", "0.02"],
+           "axisymmetric": [], "nonaxisymmetric": ["--eps", "0.02"], "eps_ladder": [],
            "phase_diagram": []}
 
 
