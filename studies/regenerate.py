@@ -4,7 +4,7 @@ Every study writes under ``runs/`` (ignored by git) unless told otherwise; this 
 each of them with the committed folder as ``--out``, in an order where each finds what it
 reads (cost.py reads convergence.json and axisymmetric.md). The whole set takes hours on 2
 cores (the gallery most of them); ``--only`` picks studies, ``--dry-run`` prints the
-commands, each with the sweep files it runs (:data:`SWEEP_FILES`). The studies that keep run
+commands, each with the sweeps it runs (:data:`SWEEPS`). The studies that keep run
 folders (the gallery, the constraints and sharp-limit studies, the non-axisymmetric check,
 the sweeps' points) make them through :func:`fem_ade.jobs.ensure`, so a killed regeneration
 goes on where it stopped; seven rebuild their committed report from their committed rows
@@ -35,6 +35,7 @@ STEPS = (
     ("gallery", ["studies/gallery.py", "--out", f"{RESULTS}/gallery", "--max-steps", "5000"]),
     ("readme_figure", ["studies/readme_figure.py", "--out", f"{RESULTS}/readme"]),
     ("sharp_limit", ["studies/sharp_limit.py", "--out", RESULTS]),
+    ("eps_ladder", ["studies/eps_ladder.py", "--out", RESULTS]),
     ("ade_plane", ["studies/ade_plane.py", "--out", RESULTS]),
     ("branches", ["studies/branches.py", "--out", RESULTS]),
     ("ade_branches", ["studies/ade_branches.py", "--out", RESULTS]),
@@ -44,11 +45,16 @@ STEPS = (
 )
 
 
-#: the sweep files a study runs through fem_ade.sweep (the others are scripts that run their
-#: points through fem_ade.jobs.ensure: their points depend on each other — the gallery's kicks
-#: start from a run's end, the constraints study's Δt comes from a trial, the branches'
-#: lines from their neighbours — or are not runs at all, as the benchmarks)
-SWEEP_FILES = {"phase_diagram": ("studies/sweeps/minimal.toml", "studies/sweeps/ade.toml")}
+#: the sweeps a study runs through fem_ade.sweep: its sweep files, or the sweep it builds
+#: from its plan (the gallery: a listed point per case, a kick after each). The others are
+#: measurements — timings and errors of runs made in memory (convergence, cost, bench,
+#: scaling, sweep_scaling, hard_cases, readme_figure) — or runs whose starts another solver
+#: computes: sharp_ref's shapes, Newton's branches, a trial's Δt (sharp_limit, ade_plane,
+#: branches, ade_branches, nonaxisymmetric, constraints_study); these make their run folders
+#: through fem_ade.jobs.ensure
+SWEEPS = {"gallery": ("built from its plan: studies/gallery.py point_spec, kick_spec",),
+          "eps_ladder": ("studies/sweeps/eps_ladder.toml",),
+          "phase_diagram": ("studies/sweeps/minimal.toml", "studies/sweeps/ade.toml")}
 
 
 def main(argv=None) -> dict:
@@ -60,7 +66,7 @@ def main(argv=None) -> dict:
     chosen = [(name, cmd) for name, cmd in STEPS if args.only is None or name in args.only]
     done = {}
     for name, cmd in chosen:
-        sweeps = SWEEP_FILES.get(name)
+        sweeps = SWEEPS.get(name)
         line = " ".join(["python", *cmd]) + (f"    # sweeps: {', '.join(sweeps)}" if sweeps
                                              else "")
         print(line, flush=True)
