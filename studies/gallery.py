@@ -691,21 +691,39 @@ def write_report(root: Path, names, backends, variants, quick: bool = False) -> 
              "Labels are those of `fem_ade.shape.classify`; v and Δa are the sharp surface's "
              "reduced volume and area difference; V/α, A/β, ΔA/ΔA₀ the diffuse values; φ far "
              "the median of φ farther than 6ε from the vesicle.", "",
-             "## Verdicts", "",
-             "| scene | paper | " + " | ".join(f"{v} ({b})" for v in variants for b in backends
-                                              if (v, b) != ("d", "fem")) + " |",
-             "|---|---|" + "---|" * sum(1 for v in variants for b in backends
-                                        if (v, b) != ("d", "fem"))]
+             *_verdicts_table(root, data, names, backends, variants),
+             *_runs_table(data, names, backends, variants),
+             *_backends_table(data, names, variants),
+             *_pictures(root, data, names, backends, variants)]
+    (root / "gallery.md").write_text("\n".join(lines) + "\n")
+    verdicts = {k: verdict(a, PAPER_SCENES[k[2]].shape, k[0]) if a is not None
+                else interrupted(root, *k) for k, a in data.items()}
+    verdicts = {k: v for k, v in verdicts.items() if v is not None}
+    if root.resolve() == RESULTS.resolve() and not quick:
+        write_verdicts(verdicts)
+    return {"verdicts": verdicts}
+
+
+def _verdicts_table(root: Path, data: dict, names, backends, variants) -> list[str]:
+    """The report's first section: each scene's verdict per variant and backend."""
+    from fem_ade.scenes import PAPER_SCENES
+
+    columns = [(v, b) for v in variants for b in backends if (v, b) != ("d", "fem")]
+    lines = ["## Verdicts", "",
+             "| scene | paper | " + " | ".join(f"{v} ({b})" for v, b in columns) + " |",
+             "|---|---|" + "---|" * len(columns)]
     for n in names:
         scene = PAPER_SCENES[n]
         cells = [verdict(data[(v, b, n)], scene.shape, v) if data[(v, b, n)]
-                 else interrupted(root, v, b, n) or no_seed(v, n) or "—"
-                 for v in variants for b in backends if (v, b) != ("d", "fem")]
+                 else interrupted(root, v, b, n) or no_seed(v, n) or "—" for v, b in columns]
         lines.append(f"| {n} ({scene.figure}) | {scene.shape} | " + " | ".join(cells) + " |")
-    lines += ["", "## Every run", "", HEADER, "|---" * HEADER.count("|") + "|"[:0]]
-    lines[-1] = "|" + "---|" * (HEADER.count("|") - 1)
+    return lines
+
+
+def _runs_table(data: dict, names, backends, variants) -> list[str]:
+    """Every run (and its kick) with its numbers."""
+    lines = ["", "## Every run", "", HEADER, "|" + "---|" * (HEADER.count("|") - 1)]
     for n in names:
-        scene = PAPER_SCENES[n]
         for v in variants:
             for b in backends:
                 if (v, b) == ("d", "fem") or (v == "d" and n not in SCENES_D):
@@ -717,9 +735,14 @@ def write_report(root: Path, names, backends, variants, quick: bool = False) -> 
                 lines.append(_row(scene_for(case), v, b, a))
                 if a is not None and a.get("kick"):
                     lines.append(_row(scene_for(case), v + " kick", b, a["kick"]))
-    lines += ["", "## FEM against spectral (same variant, same scene)", "",
-              "| scene | variant | label spectral | label FEM | E spectral | E FEM | rel. diff |",
-              "|---|---|---|---|---|---|---|"]
+    return lines
+
+
+def _backends_table(data: dict, names, variants) -> list[str]:
+    """The FEM's end against the spectral one, per variant and scene."""
+    lines = ["", "## FEM against spectral (same variant, same scene)", "",
+             "| scene | variant | label spectral | label FEM | E spectral | E FEM | rel. diff |",
+             "|---|---|---|---|---|---|---|"]
     for n in names:
         for v in variants:
             s, f = data.get((v, "spectral", n)), data.get((v, "fem", n))
@@ -727,6 +750,12 @@ def write_report(root: Path, names, backends, variants, quick: bool = False) -> 
                 Es, Ef = s["final"]["E"], f["final"]["E"]
                 lines.append(f"| {n} | {v} | {_label(s)} | {_label(f)} | {Es:.6g} | {Ef:.6g} | "
                              f"{abs(Ef - Es) / abs(Es):.2e} |")
+    return lines
+
+
+def _pictures(root: Path, data: dict, names, backends, variants) -> list[str]:
+    """The montages and the phase diagram (drawn), then the notes."""
+    lines = []
     for b in backends:
         path = montage(root, data, names, b, [v for v in variants if v != "d" or b == "spectral"])
         if path:
@@ -737,13 +766,7 @@ def write_report(root: Path, names, backends, variants, quick: bool = False) -> 
     notes = root / "notes.md"
     if notes.is_file():
         lines += ["", notes.read_text()]
-    (root / "gallery.md").write_text("\n".join(lines) + "\n")
-    verdicts = {k: verdict(a, PAPER_SCENES[k[2]].shape, k[0]) if a is not None
-                else interrupted(root, *k) for k, a in data.items()}
-    verdicts = {k: v for k, v in verdicts.items() if v is not None}
-    if root.resolve() == RESULTS.resolve() and not quick:
-        write_verdicts(verdicts)
-    return {"verdicts": verdicts}
+    return lines
 
 
 #: where ``python -m fem_ade.run --list`` reads each scene's verdict

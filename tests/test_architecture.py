@@ -209,7 +209,6 @@ LONG_FUNCTIONS = {
     "fem_ade/scenes.py:scene_from_mapping": (72, "each mistake in a TOML scene: its error"),
     "studies/sharp_limit.py:eps_figures": (68, "a matplotlib figure, panel by panel"),
     "fem_ade/render.py:render_history": (68, "a matplotlib figure, panel by panel"),
-    "studies/gallery.py:write_report": (65, "debt: a report's tables"),
     "fem_ade/sweep_plot.py:phase_diagram": (65, "a matplotlib figure, layer by layer"),
     "fem_ade/fem/petsc.py:__init__": (62, "the distributed set-up, in PETSc's order"),
 }
