@@ -38,6 +38,7 @@ from pathlib import Path
 
 from .lock import FolderBusy
 from .model import ModelError
+from .output import write_json_atomic
 from .status import ENDED, Status
 
 #: the errors that are a run's failure (recorded with their reason), not a bug of the caller:
@@ -87,7 +88,7 @@ def record_failure(folder: str | Path, reason: str, seconds: float | None = None
         record["status"] = str(status)
     if seconds is not None:
         record["seconds"] = round(seconds, 2)
-    _write_json(failure_record(folder), record)
+    write_json_atomic(failure_record(folder), record, make_folder=True)
 
 
 def read_summary(folder: str | Path) -> dict | None:
@@ -179,8 +180,3 @@ def _reason(path: Path) -> str:
         return "failed (its record is unreadable)"
 
 
-def _write_json(path: Path, data) -> None:
-    from .output import write_json_atomic
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(path, data)

@@ -227,10 +227,14 @@ def _jsonable(obj):
     return obj
 
 
-def write_json_atomic(path: str | Path, data: dict, indent: int | None = 2) -> None:
+def write_json_atomic(path: str | Path, data: dict, indent: int | None = 2,
+                      make_folder: bool = False) -> None:
     """``data`` as JSON in ``path``, whole or not at all (written, then renamed);
-    ``indent=None``: on one line without spaces (the studies' large caches)."""
+    ``indent=None``: on one line without spaces (the studies' large caches);
+    ``make_folder``: its folder made first if it is missing."""
     path = Path(path)
+    if make_folder:
+        path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + ".tmp")
     separators = (",", ":") if indent is None else None
     tmp.write_text(json.dumps(_jsonable(data), indent=indent, separators=separators) + "\n")

@@ -90,6 +90,7 @@ from pathlib import Path
 
 from .jobs import failure_record, record_failure
 from .model import ModelError
+from .output import write_json_atomic
 from .status import ENDED, Status
 
 if sys.version_info >= (3, 11):
@@ -517,21 +518,27 @@ def run_point(point: Point, root: str, *started) -> dict:
     start = _start(point, Path(root))
     if start is not None and not isinstance(start, Path):  # its start is not there (yet)
         return start
-    _write_json(folder.with_name(point.name + ".point.json"), point.identity())
+    _record_point(point, folder)
     if point.branch:
         done = ensure(folder, make=lambda f: _follow(point, f))
     else:
         def scene():  # made only when the run starts: its errors are the point's failure
             made = point.scene()
-            _write_json(folder.with_name(point.name + ".seed.json"),
+            write_json_atomic(folder.with_name(point.name + ".seed.json"),
                         {"point": point.name, "seed": made.description,
-                         "e_sharp": _seed_sharp_e(point)})
+                         "e_sharp": _seed_sharp_e(point)}, make_folder=True)
             return made
 
         done = ensure(folder, scene, options=point.options, after=start)
     if done.status == Status.BUSY:
         return {"point": point.name, "status": Status.BUSY, "reason": done.reason}
     return {**row(point, Path(root)), "task_s": done.seconds}
+
+
+def _record_point(point: Point, folder: Path) -> None:
+    """``NAME.point.json`` beside the point's folder: what the point is (its identity)."""
+    write_json_atomic(folder.with_name(point.name + ".point.json"), point.identity(),
+                      make_folder=True)
 
 
 def _start(point: Point, root: Path) -> Path | dict | None:
@@ -553,7 +560,7 @@ def _start(point: Point, root: Path) -> Path | dict | None:
     if status in HAS_RESULT and point.when and status not in point.when:
         reason = (f"not run: its start {point.after} ended {status}; it runs after "
                   f"{' or '.join(point.when)}")
-        _write_json(folder.with_name(point.name + ".point.json"), point.identity())
+        _record_point(point, folder)
         record_failure(folder, reason, status=Status.SKIPPED)
         return {**out, "status": Status.SKIPPED, "reason": reason}
     if status in HAS_RESULT:
@@ -561,7 +568,7 @@ def _start(point: Point, root: Path) -> Path | dict | None:
     if status in ENDED | {Status.FAILED, Status.SKIPPED}:
         how = "was skipped" if status == Status.SKIPPED else f"ended {status}"
         reason = f"its start {point.after} {how}: there is no field to start from"
-        _write_json(folder.with_name(point.name + ".point.json"), point.identity())
+        _record_point(point, folder)
         record_failure(folder, reason)
         return {**out, "status": Status.FAILED, "reason": reason}
     return {**out, "status": Status.BUSY, "reason": f"waits for {point.after} to end"}
@@ -589,9 +596,9 @@ def _follow(point: Point, folder: Path) -> None:
                   backend_options=point.run.get("backend_options"), quiet=True,
                   folds=b["folds"])
     last = rows[-1]
-    _write_json(folder / "summary.json", {
+    write_json_atomic(folder / "summary.json", {
         "status": Status.COMPLETED, "branch": b, "points": len(rows), "end": last[b["param"]],
-        "folds": [r["fold"] for r in rows if r.get("fold")], "last": last})
+        "folds": [r["fold"] for r in rows if r.get("fold")], "last": last}, make_folder=True)
 
 
 def changed(point: Point, root: Path) -> str | None:
@@ -707,13 +714,6 @@ def check_points(sweep: Sweep, root: Path, rerun_changed: bool) -> None:
                              f"({why}); give another --out, or --rerun-changed to run it "
                              "anew")
         forget(point, root)
-
-
-def _write_json(path: Path, data) -> None:
-    from .output import write_json_atomic
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(path, data)
 
 
 def row(point: Point, root: Path) -> dict:
@@ -858,12 +858,12 @@ def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | Non
         check_points(sweep, out, rerun_changed=True)
     points = sweep.points()
     axes = sweep.columns()
-    _write_json(out / "sweep.json", {"name": sweep.name, "base": sweep.base,
+    write_json_atomic(out / "sweep.json", {"name": sweep.name, "base": sweep.base,
                                      "axes": sweep.axes, "scene": sweep.fixed,
                                      "seeds": sweep.seeds, "run": sweep.run,
                                      **({"branch": sweep.branch} if sweep.branch else {}),
                                      **({"listed": sweep.listed} if sweep.listed else {}),
-                                     "points": [p.name for p in points]})
+                                     "points": [p.name for p in points]}, make_folder=True)
     rows = {p.name: row(p, out) for p in points}
     done = ENDED | {Status.FAILED} if not retry_failed else ENDED
     todo = [p for p in points if rows[p.name]["status"] not in done]

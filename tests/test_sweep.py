@@ -483,13 +483,13 @@ def test_a_point_after_a_failed_one_fails_with_the_reason(tmp_path):
     """a failed (its record, as a sweep writes it): b is recorded as failed, with a's
     status named, and c after b too; nothing of theirs runs."""
     from fem_ade.jobs import record_failure
-    from fem_ade.sweep import _write_json
+    from fem_ade.output import write_json_atomic
 
     sweep = load_sweep(_write(tmp_path / "chain.toml", CHAIN))
     out = tmp_path / "out"
     a = sweep.points()[0]
-    _write_json(out / "sweep.json", {"name": "chain"})  # (a sweep's folder)
-    _write_json(out / "points" / "a.point.json", a.identity())
+    write_json_atomic(out / "sweep.json", {"name": "chain"}, make_folder=True)  # (a sweep's)
+    write_json_atomic(out / "points" / "a.point.json", a.identity(), make_folder=True)
     record_failure(out / "points" / "a", "ModelError: made to fail")
     rows = run_sweep(sweep, out, workers=1, quiet=True)
     assert [r["status"] for r in rows] == ["failed"] * 3
