@@ -293,7 +293,7 @@ def _archived(root: Path, case: dict, kept: dict) -> dict | None:
 
 
 def run_cases(root: Path, cases: list[dict], kept: dict, *, workers: int, quiet: bool,
-              scheduler: str | None = None) -> None:
+              scheduler: str | None = None, rerun_changed: bool = False) -> None:
     """The unfinished cases and their kicks as one sweep on Dask (``workers`` processes:
     resumable, each run once; a kick runs once its case has ended, if it ended steady)."""
     from fem_ade.sweep import run_sweep
@@ -303,7 +303,7 @@ def run_cases(root: Path, cases: list[dict], kept: dict, *, workers: int, quiet:
         specs = [point_spec(c) for c in todo]
         kicks = [kick_spec(s) for c, s in zip(todo, specs, strict=True) if c["variant"] != "a"]
         run_sweep(as_sweep(specs + kicks), root / SWEEP_DIR, workers=workers, quiet=quiet,
-                  scheduler=scheduler)
+                  scheduler=scheduler, rerun_changed=rerun_changed)
 
 
 def finish_case(root: Path, case: dict, kept: dict, *, keep: bool) -> dict | None:
@@ -358,6 +358,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--verbose", action="store_true", help="the sweep's progress")
     ap.add_argument("--workers", type=int, default=2,
                     help="runs at once (Dask worker processes, one thread each; default 2)")
+    ap.add_argument("--rerun-changed", action="store_true",
+                    help="run anew the cases whose run folder was made with other settings "
+                    "(refused otherwise, with the difference)")
     ap.add_argument("--scheduler", metavar="ADDRESS", default=None,
                     help="run on this Dask scheduler instead (tcp://HOST:PORT or its scheduler "
                     "file; docs/cluster.md)")
@@ -392,7 +395,7 @@ def main(argv=None) -> dict:
     try:
         if not args.report_only:
             run_cases(root, cases, kept, workers=args.workers, quiet=not args.verbose,
-                      scheduler=args.scheduler)
+                      scheduler=args.scheduler, rerun_changed=args.rerun_changed)
         for case in cases:
             key = (case["variant"], case["backend"], case["scene"])
             if args.report_only:
