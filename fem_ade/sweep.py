@@ -43,7 +43,8 @@ steady end kicked to test its stability — is one sweep file::
     [[points]]
     name = "eps=0.02"                     # its folder's name (letters, digits, . _ - =)
     seed = "prolate"                      # vesicle: its branch (default: the first seed)
-    base = "vesicle"                      # (default: the sweep's base)
+    base = "vesicle"                      # (default: the sweep's base; or a scene file's
+                                          #  table: a scene made in code, scene_to_mapping)
     scene = {eps = 0.02}                  # over [scene]
     run = {n = 96}                        # over [run]
     [[points]]
@@ -115,7 +116,7 @@ class Point:
     """One run of a sweep: its name, the scene's parameters, its seed and run options."""
 
     name: str
-    base: str
+    base: str | dict  # a scene's name (or the vesicle family), or a scene file's table
     values: dict  # the swept parameters' values
     fixed: dict
     seed: object
@@ -140,7 +141,13 @@ class Point:
                                       self.branch["to"])
         if self.base == "vesicle":
             return vesicle_scene(**self.fixed, **self.values, **start, branch=self.seed)
-        scene = resolve_scene(self.base).with_(**self.fixed, **self.values)
+        if isinstance(self.base, dict):  # a listed point's own scene (a scene file's table)
+            from .scenes import scene_from_mapping
+
+            made = scene_from_mapping(self.base, where=f"point {self.name}: base")
+        else:
+            made = resolve_scene(self.base)
+        scene = made.with_(**self.fixed, **self.values)
         if self.branch:
             from .branch import set_parameter
 
@@ -364,8 +371,13 @@ def _listed(points, base: str, seeds: list, axes: dict) -> list[dict]:
         if name in names:
             raise ModelError(f"{where}: a point of that name is already in the sweep")
         own = table.get("base", base)
-        if not isinstance(own, str):
-            raise ModelError(f"{where}: base must be a scene name, got {own!r}")
+        if isinstance(own, dict):  # a scene of its own: what a scene file holds
+            from .scenes import scene_from_mapping
+
+            scene_from_mapping(own, where=f"{where}: base")
+        elif not isinstance(own, str):
+            raise ModelError(f"{where}: base must be a scene name or a scene's table, got "
+                             f"{own!r}")
         seed = table.get("seed", seeds[0])
         if str(seed) not in map(str, seeds):
             raise ModelError(f"{where}: seed {seed!r} is not one of the sweep's seeds "

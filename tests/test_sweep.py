@@ -549,3 +549,27 @@ def test_sweep_workers_keep_the_dynamic_mmap_threshold():
                       dashboard_address=":0", silence_logs=40) as control, Client(control) as c:
         assert c.submit(_worker_environ, "MALLOC_TRIM_THRESHOLD_").result() == "65536"
     os.environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+
+
+def test_a_listed_point_with_a_scene_of_its_own(tmp_path, capsys):
+    """A listed point's base may be a scene's table (what scene_to_mapping makes of a scene
+    built in code): it runs as that scene does (the same end as the named scene's point);
+    a table that is no scene is one line before anything runs."""
+    from fem_ade.scenes import get_scene, scene_to_mapping
+    from fem_ade.sweep import Sweep, check_sweep
+
+    own = scene_to_mapping(get_scene("discocyte"))
+    run = {"backend": "spectral", "n": 16, "steps": 4, "render": False,
+           "allow_underresolved": True}
+    sweep = Sweep("own", "discocyte", {}, {}, [0], {}, listed=[
+        {"name": "named", "base": "discocyte", "seed": 0, "scene": {}, "run": run,
+         "after": None},
+        {"name": "table", "base": own, "seed": 0, "scene": {}, "run": run, "after": None}])
+    check_sweep(sweep)
+    rows = {r["point"]: r for r in run_sweep(sweep, tmp_path / "out", workers=1, quiet=True)}
+    assert rows["table"]["status"] == "completed" and rows["table"]["E"] == rows["named"]["E"]
+    bad = _write(tmp_path / "bad.toml", 'name = "b"\nbase = "discocyte"\nseeds = [0]\n'
+                 '[[points]]\nname = "x"\nbase = {params = {eps = -1}}\n')
+    assert main([str(bad), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "[[points]] x: base" in err, err
