@@ -21,9 +21,11 @@ the two where that sweep ended in non-axisymmetric shapes (starfish-3 at v = 0.7
 (prolate; pear) — the candidates for a non-axisymmetric instability (the pear at Δa₀ = 1.58:
 at 1.64 its neck is closed at ε = 0.01).
 
-Writes ``OUT/nonaxisymmetric.md`` and ``.json``; the 3D run folders in
-``OUT/nonaxisymmetric/[eps=EPS/]`` (their summary.json committed; a finished run is read
-back, a stopped one resumed from its checkpoint).
+Writes ``OUT/nonaxisymmetric.md`` and ``.json``. The 3D runs are one sweep
+(:mod:`fem_ade.sweep`, two Dask workers): each run a listed point whose base is its revolved
+scene, in ``OUT/nonaxisymmetric/[eps=EPS/]sweep/points/CASE_{control,kicked}`` (their
+summary.json committed; a finished run is read back, a stopped one resumed from its
+checkpoint).
 
     python studies/nonaxisymmetric.py --out studies/results --eps 0.02   # ~20 min (64³)
     python studies/nonaxisymmetric.py --quick                            # ε = 0.04
@@ -115,16 +117,46 @@ def revolved(line: Path, row: dict, phi, nodes, eps: float | None = None):
     return replace(scene, params=params, ic=ic), n
 
 
-def run_3d(scene, n: int, kick: float, out: Path) -> dict:
-    from fem_ade.jobs import ensure
-    from fem_ade.runs import recipe
+#: the two 3D runs of each case: the control (as it is) and the kicked one
+KINDS = {"control": 0.0, "kicked": KICK}
+
+
+def folder_of(base: Path, name: str, kind: str) -> Path:
+    """The run folder of a case's run: a point of the study's sweep."""
+    return base / "sweep" / "points" / f"{name}_{kind}"
+
+
+def point_spec(name: str, kind: str, scene, n: int) -> dict:
+    """A case's run as a listed point of a sweep (:mod:`fem_ade.sweep`): the revolved scene
+    as its own base (a scene file's table), the steady recipe on the spectral backend."""
+    from fem_ade.scenes import scene_to_mapping
+
+    return {"name": f"{name}_{kind}", "base": scene_to_mapping(scene), "seed": 1,
+            "scene": {}, "after": None, "when": None,
+            "run": {"recipe": "steady", "max_steps": MAX_STEPS, "checkpoint_every": 200,
+                    "backend": "spectral", "n": n, "perturb": KINDS[kind], "render": False}}
+
+
+def run_all(specs: list[dict], base: Path) -> None:
+    """The cases' runs as one sweep on two Dask workers (a control beside its kicked run):
+    resumable, each run once, a failure recorded with its reason."""
+    from fem_ade.sweep import Sweep, check_sweep, run_sweep
+
+    sweep = Sweep("nonaxisymmetric", "vesicle", {}, {}, [1], {}, listed=specs)
+    check_sweep(sweep)
+    run_sweep(sweep, base / "sweep", workers=2, quiet=True)
+
+
+def result_3d(folder: Path) -> dict:
+    """What the report needs of a finished 3D run (its summary.json; a failure raises)."""
+    from fem_ade.jobs import failure_record, read_summary
     from fem_ade.sharp import reduced_energy
 
-    def options(scene):  # made only when the run starts (a finished one has no scene here)
-        return {**recipe("steady", scene), "max_steps": MAX_STEPS, "checkpoint_every": 200,
-                "backend": "spectral", "n": n, "perturb": kick, "seed": 1, "render": False}
-
-    s = ensure(out, lambda: scene, options=options).check().summary
+    s = read_summary(folder)
+    if s is None:
+        why = failure_record(folder)
+        raise RuntimeError(f"{folder}: " + (json.loads(why.read_text())["reason"]
+                                            if why.is_file() else "not run"))
     shape = s.get("shape") or {}
     return {"status": s["status"], "steps": s["steps"], "cpu_s": round(s["cpu_s"], 1),
             "eps": s["parameters"]["eps"],
@@ -133,17 +165,21 @@ def run_3d(scene, n: int, kick: float, out: Path) -> dict:
             "semi_axes": (shape.get("body") or {}).get("semi_axes")}
 
 
-def main(argv=None) -> dict:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--quick", action="store_true", help="one case of ade_branches --quick")
     ap.add_argument("--case", type=int, action="append",
-                    help="run only these cases (0-based indices of CASES; one process each "
-                         "case to run cases in parallel); the report is of the cases done")
+                    help="run only these cases (0-based indices of CASES); the report is of "
+                         "the cases done")
     ap.add_argument("--report-only", action="store_true", help="the cases already run")
     ap.add_argument("--eps", type=float, default=None,
                     help="the 3D runs' eps (default: the line's; 0.02 costs 1/16 of 0.01)")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> dict:
+    args = _parser().parse_args(argv)
     suffix = "_quick" if args.quick else ""
     lines = args.out / f"ade_branches{suffix}"
     if args.quick and not lines.is_dir():  # the quick ADE line first (a minute)
@@ -155,38 +191,46 @@ def main(argv=None) -> dict:
         ade_branches(["--quick", "--out", str(args.out)])
     base = args.out / f"nonaxisymmetric{suffix}" / ("" if args.eps is None else
                                                      f"eps={args.eps:g}")
-    rows = []
     cases = QUICK_CASES if args.quick else CASES
     chosen = set(range(len(cases))) if args.case is None else set(args.case)
+    found, specs = [], []
     for i, (v, da0, branch) in enumerate(cases):
         line = lines / f"v={v:g}" / branch
         if not line.is_dir():  # the pear's lines: up and down from where it starts
             line = line.with_name(f"{branch}-up")
         row, phi, nodes = point_of(line, da0)
         name = f"v={v:g}_da0={row['da0']:.4f}_{branch}"
-        done = all((base / name / k / "summary.json").is_file() for k in ("control", "kicked"))
+        done = all((folder_of(base, name, k) / "summary.json").is_file() for k in KINDS)
         if i not in chosen and not done or args.report_only and not done:
             continue
-        scene, n = (None, None) if done else revolved(line, row, phi, nodes, args.eps)
-        control = run_3d(scene, n, 0.0, base / name / "control")
-        kicked = run_3d(scene, n, KICK, base / name / "kicked")
-        same = (kicked["label"] == control["label"] and kicked["arms"] == control["arms"]
-                and abs(kicked["e"] / control["e"] - 1.0) < SAME)
-        rows.append({"v": v, "da0": row["da0"], "branch": branch, "eps_3d": control["eps"],
-                     "e_axisymmetric": row["e"],
-                     "unstable_axisymmetric": row["unstable"], "control": control,
-                     "kicked": kicked, "same": same,
-                     "verdict": ("stable to the kick" if same else
-                                 "left the axisymmetric state"
-                                 + (" (lower)" if kicked["e"] < control["e"] else ""))})
-        print(f"{name}: axisymmetric e = {row['e']:.5f}; 3D control {control['e']:.5f} "
-              f"({control['label']}), kicked {kicked['e']:.5f} ({kicked['label']}): "
-              f"{rows[-1]['verdict']}", flush=True)
+        if not done:
+            scene, n = revolved(line, row, phi, nodes, args.eps)
+            specs += [point_spec(name, k, scene, n) for k in KINDS]
+        found.append((v, branch, row, name))
+    if specs:
+        run_all(specs, base)
+    rows = [case_row(v, branch, row, name, base) for v, branch, row, name in found]
     from fem_ade.output import write_json_atomic
 
     write_json_atomic(args.out / f"nonaxisymmetric{suffix}.json", {"kick": KICK, "rows": rows})
     write_report(args.out / f"nonaxisymmetric{suffix}.md", rows)
     return {"rows": rows}
+
+
+def case_row(v: float, branch: str, row: dict, name: str, base: Path) -> dict:
+    """A case's row: its control and kicked runs, and whether the kick returned."""
+    control, kicked = (result_3d(folder_of(base, name, k)) for k in KINDS)
+    same = (kicked["label"] == control["label"] and kicked["arms"] == control["arms"]
+            and abs(kicked["e"] / control["e"] - 1.0) < SAME)
+    out = {"v": v, "da0": row["da0"], "branch": branch, "eps_3d": control["eps"],
+           "e_axisymmetric": row["e"], "unstable_axisymmetric": row["unstable"],
+           "control": control, "kicked": kicked, "same": same,
+           "verdict": ("stable to the kick" if same else "left the axisymmetric state"
+                       + (" (lower)" if kicked["e"] < control["e"] else ""))}
+    print(f"{name}: axisymmetric e = {row['e']:.5f}; 3D control {control['e']:.5f} "
+          f"({control['label']}), kicked {kicked['e']:.5f} ({kicked['label']}): "
+          f"{out['verdict']}", flush=True)
+    return out
 
 
 def write_report(path: Path, rows: list[dict]) -> None:
