@@ -185,7 +185,8 @@ def pf_stage(out: Path, planes, cache: dict, eps: float, say=print) -> dict:
                 if sharp is None or key in runs:
                     continue
                 say(f"  phase field: {key}")
-                row = phase_field(sharp, b, eps, "spectral", kbar=KBAR, m0=m0)
+                row = phase_field(sharp, b, eps, "spectral", out / "ade" / "runs" / key,
+                                  kbar=KBAR, m0=m0)
                 row.pop("section")
                 row["m0"] = m0
                 runs[key] = row

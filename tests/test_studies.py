@@ -509,3 +509,24 @@ def test_committed_results_stay_under_5_mb():
     total = sum(sizes.values())
     largest = sorted(sizes, key=sizes.get)[-3:]
     assert total <= 5_000_000, f"{total / 1e6:.2f} MB committed; the largest: {largest}"
+
+
+def test_ade_plane_runs_each_seed_in_a_folder_of_its_own(tmp_path, monkeypatch):
+    """The ADE plane's phase-field stage hands each seeded run a run folder of its own (its
+    quick mode is slow; this plumbing broke once without a default-suite test noticing: a
+    call without the folder sharp_limit.phase_field needs since runs became folders)."""
+    ade_plane = _load(STUDIES / "ade_plane.py")
+    calls = []
+
+    def fake(sharp, branch, eps, backend, folder, *, kbar=0.0, m0=0.0):
+        calls.append((branch, Path(folder), kbar, m0))
+        return {"section": None, "e": 1.0}
+
+    monkeypatch.setattr(ade_plane, "phase_field", fake)
+    plane = ade_plane.QUICK[0.85]
+    cache = {ade_plane._key(b, 0.85): {"rows": [{"m0": 1.8, "e": 1.0}]} for b in plane.branches}
+    runs = ade_plane.pf_stage(tmp_path, ade_plane.QUICK, cache, 0.08, say=lambda text: None)
+    assert sorted(b for b, *_ in calls) == ["pear", "prolate"] and len(runs) == 2
+    assert len({f for _, f, _, _ in calls}) == 2
+    assert all(f.parent == tmp_path / "ade" / "runs" and m0 == 1.8 and kbar == ade_plane.KBAR
+               for _, f, kbar, m0 in calls)
