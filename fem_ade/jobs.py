@@ -91,6 +91,20 @@ def record_failure(folder: str | Path, reason: str, seconds: float | None = None
     write_json_atomic(failure_record(folder), record, make_folder=True)
 
 
+def read_failure(folder: str | Path) -> dict | None:
+    """The folder's failure record as {status, reason} (status ``failed``, or ``skipped``
+    for a job not run), or None without one; an unreadable record is a failure."""
+    path = failure_record(folder)
+    if not path.is_file():
+        return None
+    try:
+        rec = json.loads(path.read_text())
+        return {"status": rec.get("status", Status.FAILED),
+                "reason": str(rec.get("reason", "failed"))}
+    except (OSError, ValueError, AttributeError):
+        return {"status": Status.FAILED, "reason": "failed (its record is unreadable)"}
+
+
 def read_summary(folder: str | Path) -> dict | None:
     """The folder's summary.json as a dict, or None (none yet, unreadable, not a table)."""
     try:
@@ -128,7 +142,7 @@ def ensure(folder: str | Path, scene=None, *, options: dict | Callable | None = 
             return Outcome(folder, summary["status"], summary,
                            seconds=time.perf_counter() - t0)
         if failed.is_file() and not retry_failed:
-            return Outcome(folder, Status.FAILED, summary, _reason(failed),
+            return Outcome(folder, Status.FAILED, summary, read_failure(folder)["reason"],
                            time.perf_counter() - t0)
         failed.unlink(missing_ok=True)  # a failure of before is tried again
         try:
@@ -171,12 +185,3 @@ def _run(folder: Path, scene, options: dict, make, after, quiet: bool, restart: 
         options = {**options, "phi0": str(after)}
     options = {"quiet": quiet, **options}
     return simulate(scene, out=folder, force=folder.is_dir(), **options)
-
-
-def _reason(path: Path) -> str:
-    try:
-        return str(json.loads(path.read_text()).get("reason", "failed"))
-    except (OSError, ValueError, AttributeError):
-        return "failed (its record is unreadable)"
-
-

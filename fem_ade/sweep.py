@@ -89,7 +89,7 @@ import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from .jobs import failure_record, record_failure
+from .jobs import failure_record, read_failure, record_failure
 from .model import ModelError
 from .output import write_json_atomic
 from .status import ENDED, Status
@@ -567,8 +567,8 @@ def _start(point: Point, root: Path) -> Path | dict | None:
     if (folder / "summary.json").is_file():  # it ran: a finished point is not looked at again
         return root / "points" / point.after
     start = root / "points" / point.after
-    out = {"point": point.name, **point.values, "seed": point.seed, "after": point.after}
-    status = _record_status(start) or status_of(start)
+    out = _head(point)
+    status = (read_failure(start) or {}).get("status") or status_of(start)
     if status in HAS_RESULT and point.when and status not in point.when:
         reason = (f"not run: its start {point.after} ended {status}; it runs after "
                   f"{' or '.join(point.when)}")
@@ -584,17 +584,6 @@ def _start(point: Point, root: Path) -> Path | dict | None:
         record_failure(folder, reason)
         return {**out, "status": Status.FAILED, "reason": reason}
     return {**out, "status": Status.BUSY, "reason": f"waits for {point.after} to end"}
-
-
-def _record_status(folder: Path) -> str | None:
-    """The status a failure record gives the folder (failed, or skipped), or None."""
-    path = failure_record(folder)
-    if not path.is_file():
-        return None
-    try:
-        return json.loads(path.read_text()).get("status", Status.FAILED)
-    except (OSError, ValueError, AttributeError):
-        return Status.FAILED
 
 
 def _follow(point: Point, folder: Path) -> None:
@@ -728,16 +717,20 @@ def check_points(sweep: Sweep, root: Path, rerun_changed: bool) -> None:
         forget(point, root)
 
 
+def _head(point: Point) -> dict:
+    """A row's first columns: the point, its parameters, its seed and its start."""
+    return {"point": point.name, **point.values, "seed": point.seed,
+            **({"after": point.after} if point.after else {})}
+
+
 def row(point: Point, root: Path) -> dict:
     """The table row of a point, from its run folder (or its failure record)."""
 
     folder = root / "points" / point.name
-    out = {"point": point.name, **point.values, "seed": point.seed,
-           **({"after": point.after} if point.after else {})}
-    failed = failure_record(folder)
-    if failed.is_file():
-        rec = json.loads(failed.read_text())
-        return {**out, "status": rec.get("status", Status.FAILED), "reason": rec["reason"]}
+    out = _head(point)
+    failed = read_failure(folder)
+    if failed is not None:
+        return {**out, **failed}
     try:
         s = json.loads((folder / "summary.json").read_text())
     except (OSError, ValueError):

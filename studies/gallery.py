@@ -310,7 +310,7 @@ def finish_case(root: Path, case: dict, kept: dict, *, keep: bool) -> dict | Non
     """The case's analysis (and its kick's), its large files then deleted unless ``keep``;
     None (and a line saying why) for a case that failed. A run stopped by a signal keeps its
     checkpoint for the next sitting: it is not analysed or slimmed, and the gallery stops."""
-    from fem_ade.jobs import failure_record
+    from fem_ade.jobs import read_failure
 
     done = _archived(root, case, kept)
     if done is not None:
@@ -321,9 +321,9 @@ def finish_case(root: Path, case: dict, kept: dict, *, keep: bool) -> dict | Non
     kicked = case["variant"] != "a" and status_of(folder) == Status.STEADY
     runs = (folder, kick) if kicked else (folder,)
     for run in runs:
-        if failure_record(run).is_file():
-            print(f"{what} FAILED: {json.loads(failure_record(run).read_text())['reason']}",
-                  flush=True)
+        failed = read_failure(run)
+        if failed is not None:
+            print(f"{what} FAILED: {failed['reason']}", flush=True)
             return None
     for run in runs:
         if status_of(run) not in ENDED:

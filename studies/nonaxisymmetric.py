@@ -149,14 +149,13 @@ def run_all(specs: list[dict], base: Path) -> None:
 
 def result_3d(folder: Path) -> dict:
     """What the report needs of a finished 3D run (its summary.json; a failure raises)."""
-    from fem_ade.jobs import failure_record, read_summary
+    from fem_ade.jobs import read_failure, read_summary
     from fem_ade.sharp import reduced_energy
 
     s = read_summary(folder)
     if s is None:
-        why = failure_record(folder)
-        raise RuntimeError(f"{folder}: " + (json.loads(why.read_text())["reason"]
-                                            if why.is_file() else "not run"))
+        failed = read_failure(folder)
+        raise RuntimeError(f"{folder}: {failed['reason'] if failed else 'not run'}")
     shape = s.get("shape") or {}
     return {"status": s["status"], "steps": s["steps"], "cpu_s": round(s["cpu_s"], 1),
             "eps": s["parameters"]["eps"],
