@@ -65,7 +65,6 @@ from pathlib import Path
 import numpy as np
 
 from fem_ade.jobs import status_of
-from fem_ade.lock import FolderBusy
 from fem_ade.model import ModelError
 from fem_ade.render import compact_png, save_figure
 from fem_ade.status import ENDED, Status
@@ -281,14 +280,17 @@ def _archived(root: Path, case: dict, kept: dict) -> dict | None:
     it has one), or kept in the archive with its folder gone (it is not run again; remove its
     archive entry to); None otherwise."""
     folder = case_dir(root, case)
-    entry = kept.get(_key(case["variant"], case["backend"], case["scene"]))
-    if entry is not None and not (folder / "analysis.json").is_file() and (
-            case["variant"] == "a" or entry.get("status") != Status.STEADY or "kick" in entry):
-        return {k: v for k, v in entry.items() if k != "kick"}
-    if (folder / "analysis.json").is_file() and (
-            case["variant"] == "a" or (kick_dir(folder) / "analysis.json").is_file()
-            or json.loads((folder / "analysis.json").read_text())["status"] != Status.STEADY):
-        return json.loads((folder / "analysis.json").read_text())
+    path = folder / "analysis.json"
+    if not path.is_file():
+        entry = kept.get(_key(case["variant"], case["backend"], case["scene"]))
+        if entry is not None and (case["variant"] == "a" or "kick" in entry
+                                  or entry.get("status") != Status.STEADY):
+            return {k: v for k, v in entry.items() if k != "kick"}
+        return None
+    analysis = json.loads(path.read_text())
+    if case["variant"] == "a" or analysis["status"] != Status.STEADY or (
+            kick_dir(folder) / "analysis.json").is_file():
+        return analysis
     return None
 
 
@@ -411,7 +413,7 @@ def main(argv=None) -> dict:
         print("gallery interrupted: finished runs are kept, an interrupted one resumes "
               "from its checkpoint next time", flush=True)
         raise SystemExit(130) from None
-    except (ModelError, FolderBusy) as err:  # a changed run folder, a scheduler, a lock
+    except ModelError as err:  # a changed run folder, a scheduler, a lock (FolderBusy)
         ap.exit(2, f"gallery: error: {err}\n")
     report = write_report(root, names, backends, args.variants, quick=quick)
     if extra:
