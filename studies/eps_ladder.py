@@ -75,7 +75,7 @@ def _cost(folder: Path) -> dict:
             "label": (s.get("shape") or {}).get("label")}
 
 
-def reprofiled(sweep: Sweep, root: Path, point, coarse: Path) -> dict:
+def reprofiled(root: Path, point, coarse: Path) -> dict:
     """The re-profiled start: the seeded run at 2ε's end, its profile made ε's, run to a
     steady state in ``root/reprofiled/NAME`` (:func:`fem_ade.jobs.ensure`)."""
     from fem_ade.jobs import ensure
@@ -120,18 +120,19 @@ def reseeded(root: Path, point, source: Path, eps: float, arm: str) -> dict:
 
 
 def run(sweep: Sweep, root: Path) -> list[dict]:
-    """The sweep (seeded and from-2ε starts), then the re-profiled starts; the rows, one per
-    ε, written to ``ladder.json`` before anything is reported."""
+    """The sweep (seeded and from-2ε starts), then the re-profiled, re-seeded and own-shape
+    starts; the rows, one per ε, written to ``ladder.json`` before anything is reported."""
     run_sweep(sweep, root, workers=1, quiet=True)
-    grid = {p.values["eps"]: p for p in sweep.points() if not p.after}
-    ladder = {p.scene().params.eps: p for p in sweep.points() if p.after}
+    points = sweep.points()  # (a listed point's values are its scene keys: its ε)
+    grid = {p.values["eps"]: p for p in points if not p.after}
+    ladder = {p.values["eps"]: p for p in points if p.after}
     rows = []
     for eps in sorted(grid, reverse=True):
         row = {"eps": eps, "seed": _cost(root / "points" / grid[eps].name)}
         if eps in ladder:
             row["from 2ε"] = _cost(root / "points" / ladder[eps].name)
             coarse = root / "points" / grid[2 * eps].name
-            row["re-profiled"] = reprofiled(sweep, root, grid[eps], coarse)
+            row["re-profiled"] = reprofiled(root, grid[eps], coarse)
             row["re-seeded"] = reseeded(root, grid[eps], coarse, 2 * eps, "reseeded")
             row["own shape"] = reseeded(root, grid[eps], root / "points" / grid[eps].name,
                                         eps, "own-shape")
