@@ -36,7 +36,7 @@ def draw(rows: list[dict], sweep, out: Path) -> list[Path]:
     (without axes: the energies of the listed points along their first scene key that all of
     them set, if any) and the montage of the end shapes."""
     written = []
-    listed = {p["name"] for p in getattr(sweep, "listed", [])}
+    listed = {p["name"] for p in sweep.listed}
     grid = [r for r in rows if r["point"] not in listed]
     if grid and (sweep.axes or not listed):
         written.append(phase_diagram(grid, sweep, out / "phase-diagram.png"))

@@ -7,7 +7,7 @@ cores (the gallery most of them); ``--only`` picks studies, ``--dry-run`` prints
 commands, each with the sweeps it runs (:data:`SWEEPS`). The studies that keep run
 folders (the gallery, the constraints and sharp-limit studies, the non-axisymmetric check,
 the sweeps' points) make them through :func:`fem_ade.jobs.ensure`, so a killed regeneration
-goes on where it stopped; seven rebuild their committed report from their committed rows
+goes on where it stopped; eight rebuild their committed report from their committed rows
 with ``--report-only`` (``tests/test_studies.py`` checks it byte for byte).
 
     python studies/regenerate.py --dry-run
