@@ -270,13 +270,15 @@ VESICLE_PARAMS = frozenset({"eps", "alpha", "beta", "delta_A0", "kappa_bar", "C"
                             "effects", "volume_functional", "A0"})
 
 
-def vesicle_scene(**kw) -> Scene:
+def vesicle_scene(*, sharp_seed: bool = True, **kw) -> Scene:
     """The ``vesicle`` family (:mod:`fem_ade.vesicle`): a vesicle of reduced volume ``v``,
     relaxed area difference ``da0``, ``kbar`` = κ̄/κ, spontaneous curvature ``C``, width
-    ``eps``, seeded on ``branch`` (prolate, oblate, stomatocyte, pear, torus, sphere)."""
+    ``eps``, seeded on ``branch`` (prolate, oblate, stomatocyte, pear, torus, sphere);
+    ``sharp_seed=False``: a scene to check options with, not to run
+    (:func:`fem_ade.vesicle.vesicle_parts`)."""
     from .vesicle import vesicle_parts
 
-    return Scene(**vesicle_parts(**kw)).validate()
+    return Scene(**vesicle_parts(sharp_seed=sharp_seed, **kw)).validate()
 
 
 def get_scene(name: str) -> Scene:

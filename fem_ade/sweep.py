@@ -129,7 +129,9 @@ class Point:
     start: dict | None = None
     when: tuple | None = None
 
-    def scene(self):
+    def scene(self, *, sharp_seed: bool = True):
+        """The point's scene; ``sharp_seed=False``: a vesicle's without its sharp seed (to
+        check options with, :func:`fem_ade.vesicle.vesicle_parts`)."""
         from .scenes import resolve_scene, vesicle_scene
 
         start = {self.branch["param"]: self.branch["from"]} if self.branch else {}
@@ -140,7 +142,8 @@ class Point:
                                       self.branch["param"], self.branch["from"],
                                       self.branch["to"])
         if self.base == "vesicle":
-            return vesicle_scene(**self.fixed, **self.values, **start, branch=self.seed)
+            return vesicle_scene(**self.fixed, **self.values, **start, branch=self.seed,
+                                 sharp_seed=sharp_seed)
         if isinstance(self.base, dict):  # a listed point's own scene (a scene file's table)
             from .scenes import scene_from_mapping
 
@@ -459,7 +462,8 @@ def _when(when, after, where: str) -> list | None:
 def check_sweep(sweep: Sweep) -> None:
     """Every point's parameters and the run options, before anything runs (ModelError, one
     line): each point's vesicle (or scene) without its sharp seed, and the first point's
-    run and each listed point's — its scene built, its configuration checked as a run's."""
+    run and each listed point's — its scene built (a vesicle's without its sharp seed),
+    its configuration checked as a run's."""
     from .registry import RECIPES
 
     for run in (sweep.run, *(spec["run"] for spec in sweep.listed)):
@@ -496,11 +500,13 @@ def check_sweep(sweep: Sweep) -> None:
 
 
 def _check_run(point: Point) -> None:
-    """The point's scene built and its run's configuration checked (ModelError, one line)."""
+    """The point's scene built and its run's configuration checked (ModelError, one line).
+    A vesicle's scene without its sharp seed: what only the seed tells (it fits the box, it
+    is thick enough) is the point's own failure when it runs, recorded with the reason."""
     from .config import RunConfig
 
     try:
-        scene = point.scene()
+        scene = point.scene(sharp_seed=False)
         kw = point.options(scene)
         allow = kw.pop("allow_underresolved", False)
         kw.pop("checkpoint_every", None)

@@ -182,10 +182,15 @@ def seed_meridian(ves: Vesicle, c: float) -> tuple[np.ndarray, np.ndarray, str]:
                      f"from; choose another branch")
 
 
-def vesicle_parts(**kw) -> dict:
+def vesicle_parts(*, sharp_seed: bool = True, **kw) -> dict:
     """The fields of the ``vesicle`` scene (:func:`fem_ade.scenes.vesicle_scene` makes the
     Scene) of :class:`Vesicle`'s parameters (``v``, ``da0``, ``kbar``, ``C``, ``eps``,
-    ``branch``, ``R0``, ``L``); ModelError (one line) for bad values."""
+    ``branch``, ``R0``, ``L``); ModelError (one line) for bad values.
+
+    ``sharp_seed=False``: a spheroid of the vesicle's v stands in for its sharp seed, and
+    what only the seed can tell (does it fit the box, is it thick enough) is not checked —
+    a scene to check a run's options with (a sweep's check before anything runs), in
+    milliseconds where a sharp solve takes 1–20 s; never one to run."""
     unknown = set(kw) - set(Vesicle.__dataclass_fields__)
     if unknown:
         raise ModelError(f"unknown vesicle parameter(s) {', '.join(sorted(unknown))}; valid: "
@@ -196,6 +201,9 @@ def vesicle_parts(**kw) -> dict:
     margin = 0.1 * ves.L + 2.0 * ves.eps
     R0 = ves.R0 if ves.R0 is not None else 0.25 * ves.L
     c = math.sqrt(2.0) * ves.C * R0
+    if not sharp_seed:
+        r, z = spheroid_meridian(ves.v, ves.branch != "oblate")
+        return _parts(ves, r, z, R0, "a spheroid standing in for the sharp seed (a check)")
     r, z, origin = seed_meridian(ves, c)
     extent = max(float(np.ptp(z)), 2.0 * float(np.max(r)))
     if ves.R0 is None and extent * R0 > ves.L - 2.0 * margin:
@@ -212,6 +220,11 @@ def vesicle_parts(**kw) -> dict:
         raise ModelError(f"the {ves.branch} at v = {ves.v:g} is {thin * R0 / ves.eps:.2g} eps "
                          f"thick (R0 = {R0:.3g} in the box): below {THICKNESS_PER_EPS:g} eps "
                          "the phase field has no membrane to speak of; give a smaller eps")
+    return _parts(ves, r, z, R0, origin)
+
+
+def _parts(ves: Vesicle, r, z, R0: float, origin: str) -> dict:
+    """The scene's fields of a vesicle seeded on the meridian (r, z) (R₀ = 1) scaled to R0."""
     D = 2.0 * ves.eps / 3.0
     effects = {"bending", "volume", "area"}
     if ves.ade[1]:

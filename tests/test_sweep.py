@@ -573,3 +573,23 @@ def test_a_listed_point_with_a_scene_of_its_own(tmp_path, capsys):
     assert main([str(bad), "--out", str(tmp_path / "o"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "[[points]] x: base" in err, err
+
+
+def test_the_check_before_anything_runs_solves_no_sharp_seed(monkeypatch):
+    """A vesicle sweep's check builds its points' scenes without their sharp seeds (a solve
+    of 1–20 s each: minimal.toml's first point, the prolate at v = 0.5, took 20 s before any
+    point ran); the seed is solved where the point runs. The committed sweep files load with
+    the sharp solver made to fail."""
+    import fem_ade.sharp
+    from fem_ade.scenes import vesicle_scene
+
+    def no_solve(*args):
+        raise AssertionError(f"a sharp solve in the check: {args}")
+
+    monkeypatch.setattr(fem_ade.sharp, "solve_cached", no_solve)
+    for name in ("minimal", "ade", "eps_ladder"):
+        assert load_sweep(ROOT / "studies" / "sweeps" / f"{name}.toml").points()
+    with pytest.raises(AssertionError, match="a sharp solve"):  # a scene to run has its seed
+        vesicle_scene(v=0.9, branch="prolate")
+    checked = vesicle_scene(v=0.9, branch="prolate", sharp_seed=False)
+    assert "standing in for the sharp seed" in checked.description
