@@ -59,9 +59,8 @@ def test_spheroid_seed_and_bad_input():
         vesicle_scene(v=0.8, branch="pear")
     for kw, match in [({"v": 0.0}, "vesicle v"), ({"branch": "cube"}, "branch must be"),
                       ({"eps": 0.5}, "vesicle eps"), ({"colour": 1}, "unknown vesicle"),
-                      ({"v": 0.55, "R0": 0.4}, "does not fit"),
-                      ({"v": 1e-9}, "below 0.2"), ({"v": 0.3}, "eps thick"),
-                      ({"eps": 0.125}, "eps thick")]:
+                      ({"v": 0.9, "R0": 0.45}, "does not fit"),  # sharp seeds of ≤ 1 s
+                      ({"v": 1e-9}, "below 0.2"), ({"eps": 0.125}, "eps thick")]:
         with pytest.raises(ModelError, match=match):
             vesicle_scene(**kw)
 
@@ -99,7 +98,7 @@ def test_vesicle_mistakes_on_the_command_line_and_in_toml(tmp_path, cli):
     written — --ic (the paper's ellipsoid's reading), a v no seed reaches, a vesicle thinner
     than 2 eps, half of the ADE term, and a TOML [params] key the [vesicle] table sets."""
     for args, word in ((["--ic", "printed"], "--ic"), (["--v", "1e-9"], "below 0.2"),
-                       (["--v", "0.3"], "eps thick"), (["--kbar", "1.4"], "go together")):
+                       (["--eps", "0.125"], "eps thick"), (["--kbar", "1.4"], "go together")):
         r = cli(["vesicle", *args, "--out", tmp_path / "x"])
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
         assert word in r.stderr and not (tmp_path / "x").exists()
