@@ -46,6 +46,8 @@ class RunConfig:
     save_every: int | None = None
     shape_every: int | None = None
     render: bool = True
+    #: compare the end shape with its sharp membrane (a sharp_ref solve of 1–20 s)
+    sharp: bool = True
     backend_options: dict = field(default_factory=dict)
 
     # -- building ---------------------------------------------------------------------------
@@ -129,7 +131,7 @@ class RunConfig:
         if self.accelerate and self.adaptive:
             raise ModelError("--accelerate and --adaptive do not go together (momentum needs a "
                              "fixed step map)")
-        for name in ("accelerate", "render"):
+        for name in ("accelerate", "render", "sharp"):
             if not isinstance(getattr(self, name), bool):
                 raise ModelError(f"{name} must be true or false, got {getattr(self, name)!r}")
 

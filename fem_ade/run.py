@@ -131,6 +131,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "volume, axes ratios, necks, dimple) every K steps in OUT/shapes.csv")
     p.add_argument("--no-render", action="store_true",
                    help="skip OUT/shape.png and OUT/history.png")
+    p.add_argument("--no-sharp", action="store_true",
+                   help="skip the end shape's comparison with its sharp membrane (a sharp_ref "
+                        "solve of 1-20 s)")
     p.add_argument("--out", help="output folder (default: runs/SCENE-BACKEND-TIME-XXXX, a new "
                                  "folder)")
     p.add_argument("--dry-run", action="store_true",
@@ -438,7 +441,7 @@ def _run_config(args, scene, options: dict):
         backend_options=options, scheme=args.scheme, constraints=args.constraints,
         adaptive=args.adaptive, accelerate=args.accelerate,
         checkpoint_every=args.checkpoint_every, save_every=args.save_every,
-        shape_every=args.shape_every, render=not args.no_render)
+        shape_every=args.shape_every, render=not args.no_render, sharp=not args.no_sharp)
 
 
 def _printed(report, code: int | None = None) -> int:

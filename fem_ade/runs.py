@@ -109,6 +109,7 @@ def simulate(
     shape_every: int | None = None,
     monitor=None,
     render: bool = True,
+    sharp: bool = True,
     out: str | Path | None = None,
     force: bool = False,
     quiet: bool = True,
@@ -128,6 +129,10 @@ def simulate(
     ``adaptive=True`` lets Δt range over [Δt/1000, 1000Δt] (the paper's scheme: below ε³/κ);
     a dict gives the fields of :class:`fem_ade.loop.AdaptiveDt`. ``accelerate=True`` iterates
     the step with momentum towards a steady state (:mod:`fem_ade.loop`; not a time history).
+
+    ``sharp=False`` leaves out the comparison of the end shape with its sharp membrane
+    (``sharp_reference``: a sharp_ref solve of 1–20 s after the run; a study that does not
+    read it need not wait for it).
 
     ``shape_every=K`` records the shape descriptors every K steps (and at the start) in
     ``OUT/shapes.csv`` and in the result's ``shapes`` (a transient shows as a label that comes
@@ -161,7 +166,7 @@ def simulate(
             max_steps=max_steps, every=every, ic=ic, perturb=perturb, seed=seed, scheme=scheme,
             constraints=constraints, adaptive=adaptive, accelerate=accelerate,
             checkpoint_every=checkpoint_every, save_every=save_every, shape_every=shape_every,
-            render=render, backend_options=backend_options)
+            render=render, sharp=sharp, backend_options=backend_options)
     scene, initial = _start_field(scene, phi0)
     config.check(scene, allow_underresolved=allow_underresolved)
     scene = scene_as_run(scene, config)
@@ -215,7 +220,7 @@ def _start_field(scene, phi0) -> tuple:
 #: simulate's keywords that a RunConfig holds (with ``config=``, none may be given)
 _RUN_KEYWORDS = ("backend", "n", "dt", "steps", "until_steady", "max_steps", "every", "ic",
                  "perturb", "seed", "scheme", "constraints", "adaptive", "accelerate",
-                 "checkpoint_every", "save_every", "shape_every", "render",
+                 "checkpoint_every", "save_every", "shape_every", "render", "sharp",
                  "backend_options")
 
 
@@ -371,8 +376,9 @@ def _check_resumable(out: Path, steps: int | None):
 
 
 #: the run.json fields a resume may change: how far it goes, how often it writes a
-#: checkpoint, whether it draws — none changes the trajectory or a file already written
-RESUMABLE_CHANGES = ("steps", "max_steps", "checkpoint_every", "render")
+#: checkpoint, whether it draws or compares with the sharp membrane — none changes the
+#: trajectory or a file already written
+RESUMABLE_CHANGES = ("steps", "max_steps", "checkpoint_every", "render", "sharp")
 
 
 def run_identity(scene: Scene, config: RunConfig) -> dict:
@@ -625,7 +631,7 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
     if out is not None:  # what was computed is written first, before any analysis
         with critical():  # a signal now waits for the run's files
             summary = _write_results(out, be, result, config, series, phi_grid)
-    grid = _analyse(be, result, phi_grid)
+    grid = _analyse(be, result, phi_grid, sharp=config.sharp)
     if out is not None:
         with critical():
             _finish(out, be, result, config, summary, grid, rows)
@@ -653,14 +659,15 @@ def _open_outputs(out, scene, config, be, start, columns):
     return writer, series, earlier
 
 
-def _analyse(be, result: RunResult, phi_grid: np.ndarray):
+def _analyse(be, result: RunResult, phi_grid: np.ndarray, *, sharp: bool = True):
     """Describe the final shape into ``result`` (with its sharp reference unless it
-    diverged); a failure of the analysis is a warning and ``result.analysis_error``, never
-    the run's. Returns the backend's (φ on the grid, surface, descriptors)."""
+    diverged or ``sharp`` is False); a failure of the analysis is a warning and
+    ``result.analysis_error``, never the run's. Returns the backend's (φ on the grid,
+    surface, descriptors)."""
     grid = (phi_grid, None, None)
     try:
         result.shape, grid = be.describe_final(result.final, grid=phi_grid)
-        if result.shape is not None and result.status != Status.DIVERGED:
+        if result.shape is not None and result.status != Status.DIVERGED and sharp:
             from .sharp import compare
 
             result.shape["sharp_reference"] = compare(be.scene.params, result.shape,

@@ -104,7 +104,8 @@ RUN_KEYS = {"recipe": str, "backend": str, "n": int, "dt": float, "steps": int,
             "until_steady": float, "max_steps": int, "every": int, "scheme": str,
             "constraints": str, "accelerate": bool, "perturb": float,
             "checkpoint_every": int, "render": bool, "backend_options": dict,
-            "allow_underresolved": bool, "geometry": str, "ic": str, "shape_every": int}
+            "allow_underresolved": bool, "geometry": str, "ic": str, "shape_every": int,
+            "sharp": bool}
 #: the table's columns (the axes' names come first, after ``point``; no timings: a resumed
 #: sweep's table is the uninterrupted one's, and each run's times are in its summary.json)
 COLUMNS = ("seed", "status", "steps", "E", "W", "G", "e", "label", "components", "genus",
@@ -514,7 +515,7 @@ def _check_run(point: Point) -> None:
             "backend", "n", "dt", "steps", "until_steady", "backend_options")},
             **{k: v for k, v in kw.items() if k in (
                 "max_steps", "every", "scheme", "constraints", "accelerate", "perturb",
-                "render", "seed")})
+                "render", "sharp", "seed")})
         config.check(scene, allow_underresolved=allow)
     except TypeError as err:
         raise ModelError(f"point {point.name}: {err}") from None

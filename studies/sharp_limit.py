@@ -314,7 +314,8 @@ def phase_field(sharp: dict, branch: str, eps: float, backend: str, folder: Path
         options = {"backend": "spectral", "n": n} if backend == "spectral" else {
             "backend": "fem", "n": n // 4 * 4, "backend_options": {"order": 4}}
     done = ensure(folder, scene, options=dict(recipe("steady", scene), **options, every=50,
-                                              render=False, checkpoint_every=CHECKPOINT_EVERY),
+                                              render=False, sharp=False,  # its own, above
+                                              checkpoint_every=CHECKPOINT_EVERY),
                   restart=True).check()
     res = done.summary
     d = res["shape"]  # the run's own descriptors of its final φ = 0 surface (sharp values)

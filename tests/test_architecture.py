@@ -204,7 +204,7 @@ LONG_FUNCTIONS = {
     "fem_ade/branch.py:follow": (113, "debt: the continuation loop with its step control"),
     "fem_ade/loop.py:run_loop": (100, "the loop: one place where a step's outcome (accept, "
                                       "retry, diverge, stop, interrupt) is decided"),
-    "fem_ade/run.py:build_parser": (93, "argparse: one option per statement"),
+    "fem_ade/run.py:build_parser": (96, "argparse: one option per statement"),
     "fem_ade/sweep.py:load_sweep": (65, "each mistake in a sweep file: its one-line error"),
     "fem_ade/scenes.py:scene_from_mapping": (72, "each mistake in a TOML scene: its error"),
     "studies/sharp_limit.py:eps_figures": (68, "a matplotlib figure, panel by panel"),
