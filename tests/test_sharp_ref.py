@@ -220,3 +220,22 @@ def test_command_line_under_an_ascii_locale_and_to_a_full_device():
                                 "--quiet"], stdout=full, stderr=subprocess.PIPE, text=True,
                                timeout=60)
         assert r.returncode == 3 and "cannot write" in r.stderr
+
+
+def test_kept_geometries_change_no_bit(monkeypatch):
+    """The optimiser's objective keeps the geometries it computed (the energy, the
+    constraints and their complex-step gradients are asked for at the same points): the
+    same solve without that keeps every bit of the result, and computes more geometries."""
+    from sharp_ref import membrane
+
+    calls = []
+    at = membrane.Spheroidal.at
+    monkeypatch.setattr(membrane.Spheroidal, "at", lambda self, *a: calls.append(1) or at(self, *a))
+    results = {}
+    for keep in (membrane._Objective.KEEP, 0):
+        monkeypatch.setattr(membrane._Objective, "KEEP", keep)
+        calls.clear()
+        r = solve("prolate", 0.93, levels=LEVELS[:1], tol=1e-6)
+        results[keep] = (len(calls), r.x.tobytes(), r.e, r.residual)
+    (kept, *a), (fresh, *b) = results.values()
+    assert a == b and fresh > 1.5 * kept, (kept, fresh)
