@@ -13,11 +13,11 @@ At κ̄/κ = 1.4 (the paper's) and two reduced volumes — v = 0.85 (prolate ↔
 * **phase field** (spectral, ε = 0.02, n = 64: ε/h = 1.28, as in the sharp-limit study): at
   a few m₀ around each sharp transition, a steady state seeded from each branch's sharp shape
   there (initial condition ``meridian``), ADE on with ΔA₀ = 8πDR₀·m₀ and exact constraints
-  with the localized volume (``sharp_limit.phase_field``); e = (W + G)/W_sphere. A run keeps
-  its seed's branch if it ends as one body whose sharp-surface reduced area difference is
-  within 0.12 of its sharp shape's (the pear's da is 0.17–0.2 above the prolate's, the
-  stomatocyte's 0.4–0.6 below the oblate's); the phase field's transition is where the lower
-  of the kept seeds changes.
+  with the localized volume (``sharp_limit.make_runs``: one sweep on two Dask workers);
+  e = (W + G)/W_sphere. A run keeps its seed's branch if it ends as one body whose
+  sharp-surface reduced area difference is within 0.12 of its sharp shape's (the pear's da
+  is 0.17–0.2 above the prolate's, the stomatocyte's 0.4–0.6 below the oblate's); the phase
+  field's transition is where the lower of the kept seeds changes.
 
 Results: ``OUT/ade_plane.md``, ``OUT/ade_plane.json``, ``OUT/ade-plane.png``; every solve and
 run cached in ``OUT/ade/solves.json`` and ``OUT/ade/runs.json`` (resumable).
@@ -43,7 +43,7 @@ from sharp_ref.branches import LEVELS, solve
 from sharp_ref.membrane import Q_ADE, BranchError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # the sharp-limit study beside it
-from sharp_limit import DA_TOL, phase_field  # noqa: E402
+from sharp_limit import DA_TOL, make_runs  # noqa: E402
 
 DEFAULT_OUT = Path("runs/studies")
 KBAR = 1.4
@@ -177,21 +177,22 @@ def classify(run: dict, sharp_rows: dict[str, dict]) -> str | None:
 def pf_stage(out: Path, planes, cache: dict, eps: float, say=print) -> dict:
     path = out / "ade" / "runs.json"
     runs = json.loads(path.read_text()) if path.is_file() else {}
+    jobs = []
     for v, plane in planes.items():
         for m0, seeds in plane.pf.items():
             for b in seeds:
                 sharp = _row(cache, b, v, m0)
                 key = f"{b}@{v:.4f}@{m0:.4f}@{eps:.4f}"
-                if sharp is None or key in runs:
-                    continue
-                say(f"  phase field: {key}")
-                row = phase_field(sharp, b, eps, "spectral", out / "ade" / "runs" / key,
-                                  kbar=KBAR, m0=m0)
-                row.pop("section")
-                row["m0"] = m0
-                runs[key] = row
-                path.parent.mkdir(parents=True, exist_ok=True)
-                write_json_atomic(path, runs, indent=None)
+                if sharp is not None and key not in runs:
+                    jobs.append(SimpleNamespace(key=key, sharp=sharp, branch=b, eps=eps,
+                                                backend="spectral",
+                                                ade={"kbar": KBAR, "m0": m0}))
+    say(f"  phase field: {len(jobs)} runs ({', '.join(job.key for job in jobs)})")
+    for key, row in make_runs(out / "ade", jobs).items():
+        row.pop("section")
+        row["m0"] = next(job.ade["m0"] for job in jobs if job.key == key)
+        runs[key] = row
+        write_json_atomic(path, runs, indent=None, make_folder=True)
     return runs
 
 

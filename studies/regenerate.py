@@ -47,14 +47,16 @@ STEPS = (
 
 #: the sweeps a study runs through fem_ade.sweep: its sweep files, or the sweep it builds
 #: from its plan (the gallery: a listed point per case, a kick after each; the
-#: non-axisymmetric check: a point per 3D run, its revolved scene as its base). The others
-#: are measurements — timings and errors of runs made in one process (convergence, cost,
-#: bench, scaling, sweep_scaling, hard_cases, readme_figure) — or runs still made by their
-#: own loops over fem_ade.jobs.ensure: sharp_limit and ade_plane (scenes made in code, as the
-#: non-axisymmetric check's), branches and ade_branches (Newton's branch lines),
+#: non-axisymmetric check: a point per 3D run, its revolved scene as its base; the sharp
+#: limit and the ADE plane: a point per seeded run, its scene as its base). The others are
+#: measurements — timings and errors of runs made in one process (convergence, cost, bench,
+#: scaling, sweep_scaling, hard_cases, readme_figure) — or runs still made by their own
+#: loops over fem_ade.jobs.ensure: branches and ade_branches (Newton's branch lines),
 #: constraints_study (its Δt from a trial's measurement)
 SWEEPS = {"gallery": ("built from its plan: studies/gallery.py point_spec, kick_spec",),
+          "sharp_limit": ("built per stage: studies/sharp_limit.py make_runs",),
           "eps_ladder": ("studies/sweeps/eps_ladder.toml",),
+          "ade_plane": ("built from its planes: studies/sharp_limit.py make_runs",),
           "nonaxisymmetric": ("built from its cases: studies/nonaxisymmetric.py point_spec",),
           "phase_diagram": ("studies/sweeps/minimal.toml", "studies/sweeps/ade.toml")}
 

@@ -33,7 +33,9 @@ kept_branch; ``branches``, ``transitions``: the sharp stage), ``OUT/sharp-branch
 along each branch; meridians), ``OUT/sharp-eps.png`` (e against ε², extrapolations) and
 ``OUT/sharp-sections.png`` (the phase field's φ = 0 at the smallest ε over the sharp
 meridian). Every solve and run is cached in ``OUT/sharp/solves.json`` and
-``OUT/sharp/runs.json`` (resumable: nothing cached is redone).
+``OUT/sharp/runs.json`` (resumable: nothing cached is redone); the phase-field runs of a
+stage are one sweep (:mod:`fem_ade.sweep`: two Dask workers, each run in
+``OUT/sharp/sweep/points/NAME``, resumed where it was killed).
 
     python studies/sharp_limit.py --out studies/results     # everything (~2 h on 2 cores)
     python studies/sharp_limit.py --out studies/results --stages eps --backends fem
@@ -46,6 +48,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -282,17 +285,14 @@ def radius(sharp: dict) -> float:
     return min(0.25, (1.0 - 2.0 * MARGIN) / extent)
 
 
-def phase_field(sharp: dict, branch: str, eps: float, backend: str, folder: Path, *,
-                kbar: float = 0.0, m0: float = 0.0) -> dict:
-    """One seeded steady state, run in ``folder`` (:func:`fem_ade.jobs.ensure`: a killed
-    run resumes from its checkpoint, a finished one is read): its energy, shape and cost;
-    with ``kbar`` (κ̄/κ), area-difference elasticity toward the reduced ``m0``
-    (ΔA₀ = 8πDR₀·m₀, R₀ the seed's in the box) — e is then (W + G) over a sharp sphere's
-    bending energy."""
+def seeded(sharp: dict, branch: str, eps: float, backend: str, *, kbar: float = 0.0,
+           m0: float = 0.0) -> SimpleNamespace:
+    """One seeded steady state: its ``scene`` (the sharp meridian, R₀ fitted in the box), its
+    ``run`` options beside the ``steady`` recipe (fem_ade.runs.simulate's keywords), its
+    ``n`` (the row's) and ``R0``; with ``kbar`` (κ̄/κ), area-difference elasticity toward
+    the reduced ``m0`` (ΔA₀ = 8πDR₀·m₀, R₀ the seed's in the box)."""
     from fem_ade.initial import Meridian
-    from fem_ade.jobs import ensure
     from fem_ade.model import Params
-    from fem_ade.runs import recipe
     from fem_ade.scenes import Scene
 
     R0, v = radius(sharp), sharp["v"]
@@ -313,24 +313,31 @@ def phase_field(sharp: dict, branch: str, eps: float, backend: str, folder: Path
     else:
         options = {"backend": "spectral", "n": n} if backend == "spectral" else {
             "backend": "fem", "n": n // 4 * 4, "backend_options": {"order": 4}}
-    done = ensure(folder, scene, options=dict(recipe("steady", scene), **options, every=50,
-                                              render=False, sharp=False,  # its own, above
-                                              checkpoint_every=CHECKPOINT_EVERY),
-                  restart=True).check()
-    res = done.summary
+    run = dict(options, every=50, render=False, sharp=False,  # its own sharp shape: above
+               checkpoint_every=CHECKPOINT_EVERY)
+    return SimpleNamespace(scene=scene, run=run, n=n, R0=R0, kbar=kbar)
+
+
+def phase_field_row(summary: dict, folder: Path, sharp: dict, branch: str, eps: float,
+                    backend: str, made: SimpleNamespace) -> dict:
+    """A seeded steady state's row, from its run folder (``made``: :func:`seeded`'s): its
+    energy, shape and cost, and its section y = ½ (``section``, for the picture); e is
+    (W + G) over a sharp sphere's bending energy."""
+    res, params = summary, made.scene.params
     d = res["shape"]  # the run's own descriptors of its final φ = 0 surface (sharp values)
     final = res["final"]
-    row = {"branch": branch, "v": v, "eps": eps, "n": n, "R0": R0, "backend": backend,
-           "status": res["status"], "steps": res["steps"],
+    row = {"branch": branch, "v": sharp["v"], "eps": eps, "n": made.n, "R0": made.R0,
+           "backend": backend, "status": res["status"], "steps": res["steps"],
            "cpu_s": round(res["cpu_s"] + (res["setup_cpu_s"] or 0.0), 2),
            "e": reduced_energy(final),  # G is 0 with ADE off
            "w": final["W"] / SPHERE_W,
            # the area difference the model's ADE term sees (the diffuse ΔA), reduced
-           "da_diffuse": final["dA"] / (8.0 * math.pi * params.D * R0) if kbar else None,
+           "da_diffuse": (final["dA"] / (8.0 * math.pi * params.D * made.R0)
+                          if made.kbar else None),
            "G": final["G"], "W": final["W"],
            "label": d["label"], "components": d["components"], "genus": d["genus"],
            "da": d["reduced_area_difference"], "v_surface": d["reduced_volume"],
-           "seconds": round(done.seconds, 1)}
+           "seconds": round(res["wall_s"], 1)}  # the loop's wall time
     row["kept_branch"] = kept(row, sharp)
     with np.load(folder / "final.npz") as z:
         grid = np.array(z["phi_grid"] if "phi_grid" in z.files else z["phi"])
@@ -338,9 +345,45 @@ def phase_field(sharp: dict, branch: str, eps: float, backend: str, folder: Path
     return row
 
 
-def run_folder(out: Path, key: str) -> Path:
-    """The run folder of a cached row (``OUT/sharp/runs/KEY``; not committed: the row is)."""
-    return out / "sharp" / "runs" / key.replace("/", "_")
+def point_name(key: str) -> str:
+    """A runs.json key as a sweep point's name (its folder's): ``/`` and ``@`` → ``_``."""
+    return re.sub(r"[^A-Za-z0-9._=-]", "_", key)
+
+
+def make_runs(root: Path, jobs: list[SimpleNamespace], workers: int = 2) -> dict[str, dict]:
+    """The seeded steady states ``jobs`` (each: ``key``, ``sharp``, ``branch``, ``eps``,
+    ``backend`` and ``ade``, the keywords kbar and m0 or none) as one sweep of listed points
+    (:mod:`fem_ade.sweep`) on ``workers`` Dask processes: each in
+    ``root/sweep/points/NAME`` (:func:`point_name`), resumable, a failure recorded with its
+    reason (and printed here). Returns {key: row} (:func:`phase_field_row`) of those that
+    ended with a result, in the jobs' order."""
+    from fem_ade.jobs import read_failure, read_summary
+    from fem_ade.scenes import scene_to_mapping
+    from fem_ade.sweep import Sweep, check_sweep, run_sweep
+
+    if not jobs:
+        return {}
+    made, specs = {}, []
+    for job in jobs:
+        made[job.key] = seeded(job.sharp, job.branch, job.eps, job.backend, **job.ade)
+        specs.append({"name": point_name(job.key), "seed": 1, "scene": {}, "after": None,
+                      "when": None, "base": scene_to_mapping(made[job.key].scene),
+                      "run": {"recipe": "steady", **made[job.key].run}})
+    sweep = Sweep(root.name, "vesicle", {}, {}, [1], {}, listed=specs)
+    check_sweep(sweep)
+    run_sweep(sweep, root / "sweep", workers=workers, quiet=True)
+    rows = {}
+    for job in jobs:
+        folder = root / "sweep" / "points" / point_name(job.key)
+        summary = read_summary(folder)
+        if summary is None or summary.get("status") in (Status.FAILED, Status.DIVERGED):
+            failed = read_failure(folder)
+            print(f"  {job.key}: no result ({failed['reason'] if failed else 'not run'})",
+                  flush=True)
+            continue
+        rows[job.key] = phase_field_row(summary, folder, job.sharp, job.branch, job.eps,
+                                        job.backend, made[job.key])
+    return rows
 
 
 def kept(run: dict, sharp: dict) -> bool:
@@ -670,9 +713,29 @@ def eps_figures(table: list[dict], runs: dict, cache: Cache, out: Path) -> None:
     plt.close(fig)
 
 
-def run_eps(cache: Cache, out: Path, backend: str, plan, only=None, fine=()) -> None:
+def run_eps(cache: Cache, out: Path, plan, columns) -> None:
+    """Stage ``eps``: the seeded steady states of each column (backend, the cases it is
+    limited to or None, the cases also at the finest ε) not yet in runs.json, as one sweep."""
     path = out / "sharp" / "runs.json"
     runs = json.loads(path.read_text()) if path.is_file() else {}
+    jobs = [job for backend, only, fine in columns
+            for job in eps_jobs(cache, runs, backend, plan, only, fine)]
+    for key, row in make_runs(out / "sharp", jobs).items():
+        sharp = next(job.sharp for job in jobs if job.key == key)
+        print(f"  {key}: e = {row['e']:.6f} (sharp {sharp['w']:.6f}), {row['label']}"
+              f"{'' if row['kept_branch'] else ' LEFT the branch'}, {row['steps']} steps, "
+              f"{row['seconds']} s", flush=True)
+        section = row.pop("section")
+        runs[key] = row
+        sections = out / "sharp" / "sections"
+        sections.mkdir(parents=True, exist_ok=True)
+        np.save(sections / (key.replace("/", "_") + ".npy"), section)
+        write_json_atomic(path, runs, indent=None)
+
+
+def eps_jobs(cache: Cache, runs: dict, backend: str, plan, only, fine) -> list:
+    """The seeded steady states of one column of stage ``eps`` not yet in ``runs``."""
+    jobs = []
     for branch, v in plan.cases:
         if only and branch not in only and _key(branch, v) not in only:
             continue
@@ -686,16 +749,9 @@ def run_eps(cache: Cache, out: Path, backend: str, plan, only=None, fine=()) -> 
             if key in runs or (not axi and eps in FINE and _key(branch, v) not in fine) or (
                     eps < stop):
                 continue
-            row = phase_field(sharp, branch, eps, backend, run_folder(out, key))
-            print(f"  {key}: e = {row['e']:.6f} (sharp {sharp['w']:.6f}), {row['label']}"
-                  f"{'' if row['kept_branch'] else ' LEFT the branch'}, {row['steps']} steps, "
-                  f"{row['seconds']} s", flush=True)
-            section = row.pop("section")
-            runs[key] = row
-            sections = out / "sharp" / "sections"
-            sections.mkdir(parents=True, exist_ok=True)
-            np.save(sections / (key.replace("/", "_") + ".npy"), section)
-            write_json_atomic(path, runs, indent=None)
+            jobs.append(SimpleNamespace(key=key, sharp=sharp, branch=branch, eps=eps,
+                                        backend=backend, ade={}))
+    return jobs
 
 
 def _ade_key(branch, v, m0, eps) -> str:
@@ -706,23 +762,25 @@ def run_ade(cache: Cache, out: Path, plan) -> None:
     """Stage ``ade``: each ADE case at every ε of the axisymmetric column."""
     path = out / "sharp" / "runs.json"
     runs = json.loads(path.read_text()) if path.is_file() else {}
+    jobs = []
     for branch, v, m0 in plan.ade_cases:
         sharp = ade_sharp(cache, branch, v, m0, ADE_KBAR)
         if sharp is None or "e" not in sharp:
             continue
-        for eps in plan.axi_eps:
-            key = _ade_key(branch, v, m0, eps)
-            if key in runs:
-                continue
-            row = phase_field(sharp, branch, eps, "axisymmetric", run_folder(out, key),
-                              kbar=ADE_KBAR, m0=m0)
-            row.pop("section")
-            row["m0"] = m0
-            print(f"  {key}: e = {row['e']:.6f} (sharp {sharp['e']:.6f}), da diffuse "
-                  f"{row['da_diffuse']:.5f}, surface {row['da']:.5f} (sharp {sharp['da']:.5f}),"
-                  f" {row['label']}, {row['steps']} steps, {row['seconds']} s", flush=True)
-            runs[key] = row
-            write_json_atomic(path, runs, indent=None)
+        jobs += [SimpleNamespace(key=_ade_key(branch, v, m0, eps), sharp=sharp, branch=branch,
+                                 eps=eps, backend="axisymmetric",
+                                 ade={"kbar": ADE_KBAR, "m0": m0})
+                 for eps in plan.axi_eps if _ade_key(branch, v, m0, eps) not in runs]
+    for key, row in make_runs(out / "sharp", jobs).items():
+        job = next(job for job in jobs if job.key == key)
+        row.pop("section")
+        row["m0"] = job.ade["m0"]
+        print(f"  {key}: e = {row['e']:.6f} (sharp {job.sharp['e']:.6f}), da diffuse "
+              f"{row['da_diffuse']:.5f}, surface {row['da']:.5f} "
+              f"(sharp {job.sharp['da']:.5f}), {row['label']}, {row['steps']} steps, "
+              f"{row['seconds']} s", flush=True)
+        runs[key] = row
+        write_json_atomic(path, runs, indent=None)
 
 
 def slope(eps: list[float], err: list[float]) -> float | None:
@@ -801,18 +859,12 @@ def run_transitions(cache: Cache, out: Path, plan) -> None:
     """Stage ``transitions``: the seeded steady states around each transition."""
     path = out / "sharp" / "runs.json"
     runs = json.loads(path.read_text()) if path.is_file() else {}
+    jobs = []
 
     def one(key, sharp, branch, eps, **ade):
-        if key in runs or sharp is None or "w" not in sharp:
-            return
-        row = phase_field(sharp, branch, eps, "axisymmetric", run_folder(out, key), **ade)
-        row.pop("section")
-        row.update({k: v for k, v in ade.items() if k == "m0"})
-        print(f"  {key}: e = {row['e']:.6f}, {row['label']}"
-              f"{'' if row['kept_branch'] else ' LEFT the branch'}, {row['steps']} steps, "
-              f"{row['seconds']} s", flush=True)
-        runs[key] = row
-        write_json_atomic(path, runs, indent=None)
+        if key not in runs and sharp is not None and "w" in sharp:
+            jobs.append(SimpleNamespace(key=key, sharp=sharp, branch=branch, eps=eps,
+                                        backend="axisymmetric", ade=ade))
 
     for eps in plan.transition_eps:
         for upper, lower, vs in plan.minimal_transitions:
@@ -825,6 +877,15 @@ def run_transitions(cache: Cache, out: Path, plan) -> None:
                 for b in branches:
                     one(_ade_key(b, v, m0, eps), ade_sharp(cache, b, v, m0, ADE_KBAR), b, eps,
                         kbar=ADE_KBAR, m0=m0)
+    for key, row in make_runs(out / "sharp", jobs).items():
+        job = next(job for job in jobs if job.key == key)
+        row.pop("section")
+        row.update({k: v for k, v in job.ade.items() if k == "m0"})
+        print(f"  {key}: e = {row['e']:.6f}, {row['label']}"
+              f"{'' if row['kept_branch'] else ' LEFT the branch'}, {row['steps']} steps, "
+              f"{row['seconds']} s", flush=True)
+        runs[key] = row
+        write_json_atomic(path, runs, indent=None)
 
 
 def _root(xs: list[float], ds: list[float]) -> float | None:
@@ -961,16 +1022,17 @@ def _main(args, plan, fine) -> dict:
         for t in plan.transitions:
             crossing(cache, *t)
     if not args.report_only and "eps" in args.stages:
+        columns = []
         for backend in args.backends:
             if backend == "spectral":
-                run_eps(cache, args.out, backend, plan, args.cases, fine)
+                columns.append((backend, args.cases, fine))
             elif backend == "axisymmetric":
-                for b in ("axisymmetric", "axisymmetric-check"):
-                    run_eps(cache, args.out, b, plan, args.cases, ())
+                columns += [(b, args.cases, ()) for b in ("axisymmetric", "axisymmetric-check")]
             else:
                 only = set(plan.fem_cases) & set(args.cases or plan.fem_cases)
                 if only:
-                    run_eps(cache, args.out, backend, plan, only, ())
+                    columns.append((backend, only, ()))
+        run_eps(cache, args.out, plan, columns)
     if not args.report_only and "ade" in args.stages:
         run_ade(cache, args.out, plan)
     if not args.report_only and "transitions" in args.stages:

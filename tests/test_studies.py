@@ -511,22 +511,57 @@ def test_committed_results_stay_under_5_mb():
     assert total <= 5_000_000, f"{total / 1e6:.2f} MB committed; the largest: {largest}"
 
 
-def test_ade_plane_runs_each_seed_in_a_folder_of_its_own(tmp_path, monkeypatch):
-    """The ADE plane's phase-field stage hands each seeded run a run folder of its own (its
-    quick mode is slow; this plumbing broke once without a default-suite test noticing: a
-    call without the folder sharp_limit.phase_field needs since runs became folders)."""
+def test_ade_plane_runs_each_seed_as_a_point_of_one_sweep(tmp_path, monkeypatch):
+    """The ADE plane's phase-field stage hands its seeded runs to sharp_limit.make_runs (one
+    sweep: each run a point of its own under OUT/ade/sweep) with their ADE, and archives
+    each row in runs.json (its quick mode is slow; this plumbing broke once without a
+    default-suite test noticing: a call without the folder the runs needed)."""
     ade_plane = _load(STUDIES / "ade_plane.py")
     calls = []
 
-    def fake(sharp, branch, eps, backend, folder, *, kbar=0.0, m0=0.0):
-        calls.append((branch, Path(folder), kbar, m0))
-        return {"section": None, "e": 1.0}
+    def fake(root, jobs, workers=2):
+        calls.append((root, jobs))
+        return {job.key: {"section": None, "e": 1.0} for job in jobs}
 
-    monkeypatch.setattr(ade_plane, "phase_field", fake)
+    monkeypatch.setattr(ade_plane, "make_runs", fake)
     plane = ade_plane.QUICK[0.85]
     cache = {ade_plane._key(b, 0.85): {"rows": [{"m0": 1.8, "e": 1.0}]} for b in plane.branches}
     runs = ade_plane.pf_stage(tmp_path, ade_plane.QUICK, cache, 0.08, say=lambda text: None)
-    assert sorted(b for b, *_ in calls) == ["pear", "prolate"] and len(runs) == 2
-    assert len({f for _, f, _, _ in calls}) == 2
-    assert all(f.parent == tmp_path / "ade" / "runs" and m0 == 1.8 and kbar == ade_plane.KBAR
-               for _, f, kbar, m0 in calls)
+    ((root, jobs),) = calls
+    assert root == tmp_path / "ade" and sorted(j.branch for j in jobs) == ["pear", "prolate"]
+    assert all(j.ade == {"kbar": ade_plane.KBAR, "m0": 1.8} and j.eps == 0.08 for j in jobs)
+    assert len({j.key for j in jobs}) == 2
+    assert sorted(runs) == sorted(j.key for j in jobs) and all(r["m0"] == 1.8
+                                                              for r in runs.values())
+    assert json.loads((tmp_path / "ade" / "runs.json").read_text()) == runs
+
+
+def test_seeded_runs_are_points_of_one_sweep(tmp_path):
+    """sharp_limit.make_runs: two seeded steady states (the quick prolate at ε = 0.08 on the
+    axisymmetric FEM, a second ε) as one sweep, each run in its own point folder, and the
+    rows equal to what the same run made alone gives (sharp_limit.seeded, simulated here);
+    a second call finds them done and runs nothing."""
+    from types import SimpleNamespace
+
+    from fem_ade.runs import recipe, simulate
+
+    sharp_limit = _load(STUDIES / "sharp_limit.py")
+    cache = sharp_limit.Cache(tmp_path / "solves.json")
+    sharp = cache.get("prolate", 0.8)
+    jobs = [SimpleNamespace(key=f"axisymmetric/prolate@0.8000/{eps:.4f}", sharp=sharp,
+                            branch="prolate", eps=eps, backend="axisymmetric", ade={})
+            for eps in (0.08, 0.064)]
+    rows = sharp_limit.make_runs(tmp_path / "sharp", jobs)
+    assert list(rows) == [j.key for j in jobs]
+    points = tmp_path / "sharp" / "sweep" / "points"
+    assert sorted(p.name for p in points.iterdir() if p.is_dir()) == sorted(
+        sharp_limit.point_name(j.key) for j in jobs)
+    made = sharp_limit.seeded(sharp, "prolate", 0.08, "axisymmetric")
+    alone = simulate(made.scene, **recipe("steady", made.scene), **made.run)
+    assert rows[jobs[0].key]["steps"] == alone.steps
+    assert rows[jobs[0].key]["W"] == alone.final["W"]  # bit for bit
+    stamp = (points / sharp_limit.point_name(jobs[0].key) / "summary.json").stat().st_mtime_ns
+    again = sharp_limit.make_runs(tmp_path / "sharp", jobs)
+    assert [r["e"] for r in again.values()] == [r["e"] for r in rows.values()]
+    assert (points / sharp_limit.point_name(jobs[0].key) / "summary.json").stat(
+    ).st_mtime_ns == stamp
