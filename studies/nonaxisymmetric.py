@@ -134,7 +134,8 @@ def point_spec(name: str, kind: str, scene, n: int) -> dict:
     return {"name": f"{name}_{kind}", "base": scene_to_mapping(scene), "seed": 1,
             "scene": {}, "after": None, "when": None,
             "run": {"recipe": "steady", "max_steps": MAX_STEPS, "checkpoint_every": 200,
-                    "backend": "spectral", "n": n, "perturb": KINDS[kind], "render": False}}
+                    "backend": "spectral", "n": n, "perturb": KINDS[kind], "render": False,
+                    "sharp": False}}  # compared with the axisymmetric run, not sharp_ref
 
 
 def run_all(specs: list[dict], base: Path) -> None:
