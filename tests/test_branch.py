@@ -177,12 +177,21 @@ def test_stability_equals_a_dense_eigensolve(branch):
         + p.kappa * p.eps * K @ (K / w[:, None])
     t = translation(be)
 
+    Hs = 0.5 * (H + H.T)
+
     def lowest(C):  # the dense problem on {Cᵀv = 0}: its 4 lowest, and the lowest mode
-        Q, _ = np.linalg.qr(np.column_stack(C), mode="complete")
-        Z = Q[:, len(C):]
-        vals, vecs = sla.eigh(Z.T @ (0.5 * (H + H.T)) @ Z, Z.T @ P @ Z,
-                              subset_by_index=[0, 3])
-        v = Z @ vecs[:, 0]
+        # on the null space Z = Q[:, k:] of Cᵀ, Q = I - V T Vᵀ of k Householder reflectors:
+        # Zᵀ M Z is the trailing block of Qᵀ M Q (LAPACK's ormqr: O(N²k), not Z's O(N³))
+        k = len(C)
+        (a, tau), _ = sla.qr(np.column_stack(C), mode="raw")
+
+        def QtMQ(M):
+            M = sla.lapack.dormqr("L", "T", a, tau, M, 64 * N)[0]
+            return sla.lapack.dormqr("R", "N", a, tau, M, 64 * N)[0][k:, k:]
+
+        vals, vecs = sla.eigh(QtMQ(Hs), QtMQ(P), subset_by_index=[0, 3])
+        v = sla.lapack.dormqr("L", "N", a, tau, np.r_[np.zeros(k), vecs[:, 0]][:, None],
+                              64 * N)[0][:, 0]  # Z @ vecs[:, 0]
         return vals, abs(v @ P @ t) / np.sqrt((v @ P @ v) * (t @ P @ t))
 
     dense, along_t = lowest([*lin.C[:2], P @ t])
