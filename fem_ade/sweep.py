@@ -844,9 +844,12 @@ def _cell(value):
 def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | None = None,
               quiet: bool = False, retry_s: float = 2.0, retry_failed: bool = False,
               rerun_changed: bool = False) -> list[dict]:
-    """Run every unfinished point on Dask (``retry_failed``: the failed ones too); the
-    table's rows (also written to sweep.csv). A point's folder made with other settings is
-    refused (:func:`check_points`) or, with ``rerun_changed``, run anew."""
+    """Run every unfinished point on Dask (``retry_failed``: the failed ones too) — on the
+    ``scheduler``'s workers, or on a local cluster of at most ``workers`` processes and no
+    more than the points to run (none when every point has ended: a finished sweep's table
+    in under a second); the table's rows (also written to sweep.csv). A point's folder made
+    with other settings is refused (:func:`check_points`) or, with ``rerun_changed``, run
+    anew."""
     from dask.distributed import as_completed
 
     from .lock import FolderLock
@@ -857,14 +860,15 @@ def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | Non
         os.environ.setdefault(k, "1")  # one thread per worker process
     if out.is_dir() and not rerun_changed:  # its points must be this sweep's: nothing made
         check_points(sweep, out, rerun_changed=False)
-    client, cluster = connect(scheduler, workers)  # a refused scheduler: nothing written
+    client = cluster = None
+    if scheduler is not None:  # a refused scheduler: nothing written
+        client, cluster = connect(scheduler, workers)
     try:
         out.mkdir(parents=True, exist_ok=True)
         lock = FolderLock(out).acquire()  # one driver per sweep folder
     except BaseException:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        if client is not None:
+            client.close()
         raise
     if rerun_changed:  # under the lock: remove the changed points' runs
         check_points(sweep, out, rerun_changed=True)
@@ -880,12 +884,17 @@ def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | Non
     done = ENDED | {Status.FAILED} if not retry_failed else ENDED
     todo = [p for p in points if rows[p.name]["status"] not in done]
     try:
+        if client is None and todo:  # a local cluster of no more workers than points to run
+            client, cluster = connect(None, min(workers, len(todo)))
         say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
         say(f"sweep {sweep.name}: {len(points)} points, {len(points) - len(todo)} done, "
-            f"{len(todo)} to run on {_workers_text(client)}; dashboard {client.dashboard_link}")
-        _drive(client, todo, out, rows, axes, quiet, retry_s, as_completed)
-        client.close()
+            f"{len(todo)} to run" + (f" on {_workers_text(client)}; dashboard "
+                                     f"{client.dashboard_link}" if client else ""))
+        if todo:
+            _drive(client, todo, out, rows, axes, quiet, retry_s, as_completed)
     finally:
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
         write_table([rows[p.name] for p in points], out / "sweep.csv", axes)

@@ -593,3 +593,23 @@ def test_the_check_before_anything_runs_solves_no_sharp_seed(monkeypatch):
         vesicle_scene(v=0.9, branch="prolate")
     checked = vesicle_scene(v=0.9, branch="prolate", sharp_seed=False)
     assert "standing in for the sharp seed" in checked.description
+
+
+def test_a_local_cluster_only_for_points_to_run(tmp_path, monkeypatch):
+    """A local cluster has no more workers than points to run, and a sweep whose points
+    have all ended starts none: its table again, the same."""
+    import fem_ade.sweep
+
+    asked = []
+    connect = fem_ade.sweep.connect
+    monkeypatch.setattr(fem_ade.sweep, "connect",
+                        lambda scheduler, workers: asked.append(workers) or connect(scheduler,
+                                                                                   workers))
+    sweep = load_sweep(_file(tmp_path, axes="[0.9]", steps=2))
+    out = tmp_path / "out"
+    rows = run_sweep(sweep, out, workers=2, quiet=True)
+    assert asked == [1] and rows[0]["status"] == "max_steps"
+    table = _table(out / "sweep.csv")
+    again = run_sweep(sweep, out, workers=2, quiet=True)
+    assert asked == [1] and again[0]["E"] == rows[0]["E"]
+    assert _table(out / "sweep.csv") == table
