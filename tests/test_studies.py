@@ -267,6 +267,10 @@ def check_eps_ladder(result, out):
                                                                         1 - 1e-15))))
     text = (out / "eps_ladder-quick.md").read_text()
     assert "| 0.08 | " in text and "| 0.04 | " in text
+    # the sweep file's [run] sharp = false: no comparison with the sharp prolate after a run
+    summary = json.loads((root / "points" / "eps=0.08_seed=prolate" / "summary.json")
+                         .read_text())
+    assert summary["sharp_reference"] is None and summary["shape"]["label"]
 
 
 def check_sharp_limit(result, out):
