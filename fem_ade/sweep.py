@@ -959,7 +959,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", help="the sweep folder (default runs/sweeps/NAME)")
     where = ap.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=2,
-                       help="local Dask worker processes (default 2)")
+                       help="local Dask worker processes, at most one per point left to run "
+                            "(default 2)")
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="an existing Dask scheduler: tcp://HOST:PORT or its scheduler file")
     ap.add_argument("--retry-failed", action="store_true",
