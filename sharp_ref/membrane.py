@@ -154,7 +154,10 @@ class Spheroidal:
         return self.geometry(x[:-1], x[-1], c)
 
     def geometry(self, coef: np.ndarray, S: float, c: float = 0.0) -> Geometry:
-        t = self.t
+        """One meridian, or a batch: ``coef`` (k, B) and ``S`` (B,) give B of them (the
+        columns; the totals are then arrays of B)."""
+        t, weights = (self.t, self.weights) if coef.ndim == 1 else (self.t[:, None],
+                                                                     self.weights[:, None])
         psi = np.pi * t + self.sin @ coef
         dpsi = np.pi + self.dcos @ coef
         r = S * (self.Q @ np.cos(psi))
@@ -164,13 +167,13 @@ class Spheroidal:
         inner = slice(1, -1)
         k2[inner] = np.sin(psi[inner]) / r[inner]
         k2[0], k2[-1] = k1[0], k1[-1]  # at a pole sin ψ / r → ψ′
-        w = self.weights * S
-        area = 2.0 * np.pi * np.sum(w * r)
-        volume = np.pi * np.sum(w * r * r * np.sin(psi))
+        w = weights * S
+        area = 2.0 * np.pi * np.sum(w * r, axis=0)
+        volume = np.pi * np.sum(w * r * r * np.sin(psi), axis=0)
         two_h = k1 + k2
-        return Geometry(t, psi, r, z, k1, k2, S, area, volume,
-                        2.0 * np.pi * np.sum(w * two_h * r),
-                        2.0 * np.pi * np.sum(w * (two_h - c) ** 2 * r), r[-1])
+        return Geometry(self.t, psi, r, z, k1, k2, S, area, volume,
+                        2.0 * np.pi * np.sum(w * two_h * r, axis=0),
+                        2.0 * np.pi * np.sum(w * (two_h - c) ** 2 * r, axis=0), r[-1])
 
 
 class Toroidal:
@@ -195,7 +198,9 @@ class Toroidal:
         return self.geometry(x[:-2], x[-2], x[-1], c)
 
     def geometry(self, coef: np.ndarray, S: float, r0: float, c: float = 0.0) -> Geometry:
-        t = self.t
+        """One meridian, or a batch (as :meth:`Spheroidal.geometry`)."""
+        t, weights = (self.t, self.weights) if coef.ndim == 1 else (self.t[:, None],
+                                                                     self.weights[:, None])
         psi = 0.5 * np.pi + 2.0 * np.pi * t + self.sin @ coef
         dpsi = 2.0 * np.pi + self.dcos @ coef
         cos, sin = np.cos(psi), np.sin(psi)
@@ -203,13 +208,13 @@ class Toroidal:
         z = -S * (self.Q @ sin)
         k1 = dpsi / S
         k2 = sin / r
-        w = self.weights * S
+        w = weights * S
         two_h = k1 + k2
-        return Geometry(t, psi, r, z, k1, k2, S, 2.0 * np.pi * np.sum(w * r),
-                        np.pi * np.sum(w * r * r * sin),
-                        2.0 * np.pi * np.sum(w * two_h * r),
-                        2.0 * np.pi * np.sum(w * (two_h - c) ** 2 * r),
-                        S * np.sum(self.weights * sin))
+        return Geometry(self.t, psi, r, z, k1, k2, S, 2.0 * np.pi * np.sum(w * r, axis=0),
+                        np.pi * np.sum(w * r * r * sin, axis=0),
+                        2.0 * np.pi * np.sum(w * two_h * r, axis=0),
+                        2.0 * np.pi * np.sum(w * (two_h - c) ** 2 * r, axis=0),
+                        S * np.sum(weights * sin, axis=0))
 
 
 # ---------------------------------------------------------------------------------------
@@ -315,12 +320,10 @@ class _Objective:
 def _gradient(f, x) -> np.ndarray:
     """∂f/∂x by complex steps (exact to round-off: every operation here is analytic)."""
     h = 1e-30
-    out = []
-    for i in range(len(x)):
-        y = x.astype(complex)
-        y[i] += 1j * h
-        out.append(np.imag(f(y)) / h)
-    return np.array(out).T
+    n = len(x)
+    steps = np.repeat(x.astype(complex)[:, None], n, axis=1)  # column i: x + ih eᵢ
+    steps[np.arange(n), np.arange(n)] += 1j * h
+    return np.imag(f(steps)) / h  # f of all n steps at once (the families take batches)
 
 
 def minimise(family, problem: Problem, x0: np.ndarray, *, maxiter: int = 3000):
