@@ -46,7 +46,7 @@ class RunConfig:
     save_every: int | None = None
     shape_every: int | None = None
     render: bool = True
-    #: compare the end shape with its sharp membrane (a sharp_ref solve of 1–20 s)
+    #: compare the end shape with its sharp membrane (a sharp_ref solve of 0.3–10 s)
     sharp: bool = True
     backend_options: dict = field(default_factory=dict)
 

@@ -133,7 +133,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip OUT/shape.png and OUT/history.png")
     p.add_argument("--no-sharp", action="store_true",
                    help="skip the end shape's comparison with its sharp membrane (a sharp_ref "
-                        "solve of 1-20 s)")
+                        "solve of 0.3-10 s)")
     p.add_argument("--out", help="output folder (default: runs/SCENE-BACKEND-TIME-XXXX, a new "
                                  "folder)")
     p.add_argument("--dry-run", action="store_true",

@@ -131,7 +131,7 @@ def simulate(
     the step with momentum towards a steady state (:mod:`fem_ade.loop`; not a time history).
 
     ``sharp=False`` leaves out the comparison of the end shape with its sharp membrane
-    (``sharp_reference``: a sharp_ref solve of 1–20 s after the run; a study that does not
+    (``sharp_reference``: a sharp_ref solve of 0.3–10 s after the run; a study that does not
     read it need not wait for it).
 
     ``shape_every=K`` records the shape descriptors every K steps (and at the start) in

@@ -190,7 +190,7 @@ def vesicle_parts(*, sharp_seed: bool = True, **kw) -> dict:
     ``sharp_seed=False``: a spheroid of the vesicle's v stands in for its sharp seed, and
     what only the seed can tell (does it fit the box, is it thick enough) is not checked —
     a scene to check a run's options with (a sweep's check before anything runs), in
-    milliseconds where a sharp solve takes 1–20 s; never one to run."""
+    milliseconds where a sharp solve takes 0.3–10 s; never one to run."""
     unknown = set(kw) - set(Vesicle.__dataclass_fields__)
     if unknown:
         raise ModelError(f"unknown vesicle parameter(s) {', '.join(sorted(unknown))}; valid: "

@@ -577,7 +577,7 @@ def test_a_listed_point_with_a_scene_of_its_own(tmp_path, capsys):
 
 def test_the_check_before_anything_runs_solves_no_sharp_seed(monkeypatch):
     """A vesicle sweep's check builds its points' scenes without their sharp seeds (a solve
-    of 1–20 s each: minimal.toml's first point, the prolate at v = 0.5, took 20 s before any
+    of 0.3–10 s each: minimal.toml's first point, the prolate at v = 0.5, took 20 s before any
     point ran); the seed is solved where the point runs. The committed sweep files load with
     the sharp solver made to fail."""
     import fem_ade.sharp
