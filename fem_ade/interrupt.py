@@ -7,6 +7,12 @@ then writes its checkpoint and the run ends with status ``interrupted``, exit 13
 one — the writing of a checkpoint, of the final fields, of the summary — it only notes the
 signal, and KeyboardInterrupt is raised when the section ends: the file is whole, then the
 run stops.
+
+A KeyboardInterrupt raised while Python runs a finalizer or a weak reference's callback (the
+garbage collector may run one at any moment: during the set-up of an AMG hierarchy, say) is
+printed as "Exception ignored in ..." and dropped; the program goes on as if no signal had
+come. The handler therefore also notes each signal it raises for, and the time loop asks
+:func:`check` before each step: a dropped one is raised there.
 """
 
 from __future__ import annotations
@@ -16,14 +22,31 @@ from contextlib import contextmanager
 
 _depth = 0
 _pending: int | None = None
+_raised: int | None = None  # a signal raised as KeyboardInterrupt, not yet handled
 
 
 def handler(signum, frame) -> None:
-    global _pending
+    global _pending, _raised
     if _depth:
         _pending = signum
         return
+    _raised = signum
     raise KeyboardInterrupt
+
+
+def check() -> None:
+    """Raise KeyboardInterrupt for a signal whose exception Python dropped (it came while a
+    finalizer ran); nothing otherwise."""
+    global _raised
+    if _raised is not None:
+        _raised = None
+        raise KeyboardInterrupt
+
+
+def handled() -> None:
+    """Where a KeyboardInterrupt is caught: the signal behind it, if any, was delivered."""
+    global _raised
+    _raised = None
 
 
 def install() -> None:

@@ -64,6 +64,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm.auto import tqdm
 
+from . import interrupt
 from .backend import Backend
 from .constraints import ConstraintError
 from .model import HISTORY_COLUMNS, ModelError, diagnose_blowup
@@ -542,6 +543,7 @@ def run_loop(
         for tracker in trackers:
             tracker.start(ls, diag)
         while ls.k < total:
+            interrupt.check()  # a signal whose exception Python dropped (fem_ade.interrupt)
             good, good_k = backend.state(), ls.k  # with momentum: the iterate x_k
             measure = any(tr.wants_diagnostics(ls.k + 1) for tr in trackers)
             extra, bad, diag = stepper.advance(backend, ls, good, measure)
@@ -578,6 +580,7 @@ def run_loop(
                 status = Status.MAX_STEPS
                 message = f"not steady after max_steps = {total} steps"
     except KeyboardInterrupt:
+        interrupt.handled()
         if good is not None and good_k == ls.k:
             backend.set_state(good)  # the interrupted step may be half done
         status = Status.INTERRUPTED
