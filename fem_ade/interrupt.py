@@ -12,12 +12,14 @@ A KeyboardInterrupt raised while Python runs a finalizer or a weak reference's c
 garbage collector may run one at any moment: during the set-up of an AMG hierarchy, say) is
 printed as "Exception ignored in ..." and dropped; the program goes on as if no signal had
 come. The handler therefore also notes each signal it raises for, and the time loop asks
-:func:`check` before each step: a dropped one is raised there.
+:func:`check` before each step: a dropped one is raised there (and :func:`install` keeps
+Python from printing it: the interruption's one line stays the only one).
 """
 
 from __future__ import annotations
 
 import signal
+import sys
 from contextlib import contextmanager
 
 _depth = 0
@@ -50,9 +52,18 @@ def handled() -> None:
 
 
 def install() -> None:
-    """SIGINT and SIGTERM → :func:`handler` (in the main thread of the command line)."""
+    """SIGINT and SIGTERM → :func:`handler` (in the main thread of the command line), and
+    :func:`unraisable` as Python's hook for the exceptions it drops."""
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, handler)
+    sys.unraisablehook = unraisable
+
+
+def unraisable(info) -> None:
+    """Python's report of an exception it dropped, but for a KeyboardInterrupt: that one is
+    raised again by :func:`check`, and its traceback would only add lines to stderr."""
+    if not issubclass(info.exc_type, KeyboardInterrupt):
+        sys.__unraisablehook__(info)
 
 
 def pending() -> bool:

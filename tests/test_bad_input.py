@@ -493,7 +493,7 @@ def test_api_mistakes(tmp_path):
 
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
-def test_a_signal_whose_exception_python_dropped_still_stops_the_run():
+def test_a_signal_whose_exception_python_dropped_still_stops_the_run(monkeypatch, capsys):
     """A signal that comes while a finalizer runs (the set-up's garbage collection): Python
     prints "Exception ignored in ..." and drops the handler's KeyboardInterrupt — CI saw a
     SIGINT during the AMG set-up end as exit 0. The loop raises it before its next step:
@@ -510,6 +510,11 @@ def test_a_signal_whose_exception_python_dropped_still_stops_the_run():
 
     Finalized()  # its __del__ raises in the handler; Python ignores it
     gc.collect()
+    monkeypatch.setattr(sys, "unraisablehook", interrupt.unraisable)  # as the CLI installs
+    capsys.readouterr()
+    Finalized()  # again: the CLI's hook prints nothing of it
+    gc.collect()
+    assert capsys.readouterr().err == ""
     res = simulate(get_scene("discocyte"), backend="spectral", n=16, steps=5, render=False,
                    allow_underresolved=True)
     assert res.status == "interrupted" and res.steps == 0, res.message
