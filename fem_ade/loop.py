@@ -561,17 +561,18 @@ def run_loop(
                 if ls.k > 0 and rows and rows[-1]["step"] != ls.k and _finite(last_diag):
                     recorder.record(ls, last_diag)  # the last finite state, for the record
                 break
-            ls.k += 1
-            ls.t += ls.dt
-            ls.extra = {**ls.extra, **extra}
-            stepper.accepted(backend, ls, good, diag)
-            if diag is not None:
-                last_diag = diag
-            stop = None
-            for tracker in trackers:
-                stop = tracker.handle(ls, diag)
-                if stop is not None:
-                    break
+            with interrupt.critical():  # the step's count, time, rows and checkpoint whole
+                ls.k += 1                # (a signal between them lost a row of history.csv)
+                ls.t += ls.dt
+                ls.extra = {**ls.extra, **extra}
+                stepper.accepted(backend, ls, good, diag)
+                if diag is not None:
+                    last_diag = diag
+                stop = None
+                for tracker in trackers:
+                    stop = tracker.handle(ls, diag)
+                    if stop is not None:
+                        break
             if stop is not None:
                 status, message = stop
                 break

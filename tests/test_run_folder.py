@@ -440,3 +440,32 @@ def test_random_kills_resume_bit_for_bit(tmp_path, cli):
         same_run(whole, out)
         compared += 1
     print(f"{done} kills over {compared} runs, each resumed to the uninterrupted result")
+
+
+def test_a_signal_right_after_a_step_keeps_its_row(tmp_path, monkeypatch):
+    """A signal between a step and its bookkeeping (its count, time, history row and
+    checkpoint) waits for them: the run stops at that step with its row written, and the
+    resumed run ends with the uninterrupted history. The random-kill test once lost the row of
+    step 60 so (a SIGTERM there: the checkpoint at 60 without its row)."""
+    from fem_ade import interrupt, loop
+    from fem_ade.runs import resume, simulate
+    from fem_ade.scenes import get_scene
+
+    kw = dict(backend="spectral", n=16, steps=20, every=5, checkpoint_every=7, render=False,
+              allow_underresolved=True)
+    whole = simulate(get_scene("discocyte"), out=tmp_path / "W", **kw)
+    accepted = loop.FixedStep.accepted
+
+    def signal_after_step_10(self, backend, ls, good, diag):
+        accepted(self, backend, ls, good, diag)
+        if ls.k == 10:
+            interrupt.handler(signal.SIGTERM, None)  # as if SIGTERM came here
+
+    monkeypatch.setattr(loop.FixedStep, "accepted", signal_after_step_10)
+    cut = simulate(get_scene("discocyte"), out=tmp_path / "R", **kw)
+    assert cut.status == "interrupted" and cut.steps == 10
+    assert list(read_history(tmp_path / "R" / "history.csv")["step"]) == [0, 5, 10]
+    monkeypatch.setattr(loop.FixedStep, "accepted", accepted)
+    done = resume(tmp_path / "R", quiet=True)
+    assert done.status == whole.status and done.final == whole.final
+    same_run(tmp_path / "W", tmp_path / "R")
