@@ -188,10 +188,10 @@ def pf_stage(out: Path, planes, cache: dict, eps: float, say=print) -> dict:
                                                 backend="spectral",
                                                 ade={"kbar": KBAR, "m0": m0}))
     say(f"  phase field: {len(jobs)} runs ({', '.join(job.key for job in jobs)})")
-    for key, row in make_runs(out / "ade", jobs).items():
+    for job, row in make_runs(out / "ade", jobs):
         row.pop("section")
-        row["m0"] = next(job.ade["m0"] for job in jobs if job.key == key)
-        runs[key] = row
+        row["m0"] = job.ade["m0"]
+        runs[job.key] = row
         write_json_atomic(path, runs, indent=None, make_folder=True)
     return runs
 

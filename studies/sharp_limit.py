@@ -350,19 +350,19 @@ def point_name(key: str) -> str:
     return re.sub(r"[^A-Za-z0-9._=-]", "_", key)
 
 
-def make_runs(root: Path, jobs: list[SimpleNamespace], workers: int = 2) -> dict[str, dict]:
+def make_runs(root: Path, jobs: list[SimpleNamespace], workers: int = 2) -> list[tuple]:
     """The seeded steady states ``jobs`` (each: ``key``, ``sharp``, ``branch``, ``eps``,
     ``backend`` and ``ade``, the keywords kbar and m0 or none) as one sweep of listed points
     (:mod:`fem_ade.sweep`) on ``workers`` Dask processes: each in
     ``root/sweep/points/NAME`` (:func:`point_name`), resumable, a failure recorded with its
-    reason (and printed here). Returns {key: row} (:func:`phase_field_row`) of those that
+    reason (and printed here). Returns (job, row) (:func:`phase_field_row`) of those that
     ended with a result, in the jobs' order."""
     from fem_ade.jobs import read_failure, read_summary
     from fem_ade.scenes import scene_to_mapping
     from fem_ade.sweep import Sweep, check_sweep, run_sweep
 
     if not jobs:
-        return {}
+        return []
     made, specs = {}, []
     for job in jobs:
         made[job.key] = seeded(job.sharp, job.branch, job.eps, job.backend, **job.ade)
@@ -372,7 +372,7 @@ def make_runs(root: Path, jobs: list[SimpleNamespace], workers: int = 2) -> dict
     sweep = Sweep(root.name, "vesicle", {}, {}, [1], {}, listed=specs)
     check_sweep(sweep)
     run_sweep(sweep, root / "sweep", workers=workers, quiet=True)
-    rows = {}
+    rows = []
     for job in jobs:
         folder = root / "sweep" / "points" / point_name(job.key)
         summary = read_summary(folder)
@@ -381,8 +381,8 @@ def make_runs(root: Path, jobs: list[SimpleNamespace], workers: int = 2) -> dict
             print(f"  {job.key}: no result ({failed['reason'] if failed else 'not run'})",
                   flush=True)
             continue
-        rows[job.key] = phase_field_row(summary, folder, job.sharp, job.branch, job.eps,
-                                        job.backend, made[job.key])
+        rows.append((job, phase_field_row(summary, folder, job.sharp, job.branch, job.eps,
+                                          job.backend, made[job.key])))
     return rows
 
 
@@ -720,9 +720,9 @@ def run_eps(cache: Cache, out: Path, plan, columns) -> None:
     runs = json.loads(path.read_text()) if path.is_file() else {}
     jobs = [job for backend, only, fine in columns
             for job in eps_jobs(cache, runs, backend, plan, only, fine)]
-    for key, row in make_runs(out / "sharp", jobs).items():
-        sharp = next(job.sharp for job in jobs if job.key == key)
-        print(f"  {key}: e = {row['e']:.6f} (sharp {sharp['w']:.6f}), {row['label']}"
+    for job, row in make_runs(out / "sharp", jobs):
+        key = job.key
+        print(f"  {key}: e = {row['e']:.6f} (sharp {job.sharp['w']:.6f}), {row['label']}"
               f"{'' if row['kept_branch'] else ' LEFT the branch'}, {row['steps']} steps, "
               f"{row['seconds']} s", flush=True)
         section = row.pop("section")
@@ -771,8 +771,8 @@ def run_ade(cache: Cache, out: Path, plan) -> None:
                                  eps=eps, backend="axisymmetric",
                                  ade={"kbar": ADE_KBAR, "m0": m0})
                  for eps in plan.axi_eps if _ade_key(branch, v, m0, eps) not in runs]
-    for key, row in make_runs(out / "sharp", jobs).items():
-        job = next(job for job in jobs if job.key == key)
+    for job, row in make_runs(out / "sharp", jobs):
+        key = job.key
         row.pop("section")
         row["m0"] = job.ade["m0"]
         print(f"  {key}: e = {row['e']:.6f} (sharp {job.sharp['e']:.6f}), da diffuse "
@@ -877,8 +877,8 @@ def run_transitions(cache: Cache, out: Path, plan) -> None:
                 for b in branches:
                     one(_ade_key(b, v, m0, eps), ade_sharp(cache, b, v, m0, ADE_KBAR), b, eps,
                         kbar=ADE_KBAR, m0=m0)
-    for key, row in make_runs(out / "sharp", jobs).items():
-        job = next(job for job in jobs if job.key == key)
+    for job, row in make_runs(out / "sharp", jobs):
+        key = job.key
         row.pop("section")
         row.update({k: v for k, v in job.ade.items() if k == "m0"})
         print(f"  {key}: e = {row['e']:.6f}, {row['label']}"

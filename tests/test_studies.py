@@ -525,7 +525,7 @@ def test_ade_plane_runs_each_seed_as_a_point_of_one_sweep(tmp_path, monkeypatch)
 
     def fake(root, jobs, workers=2):
         calls.append((root, jobs))
-        return {job.key: {"section": None, "e": 1.0} for job in jobs}
+        return [(job, {"section": None, "e": 1.0}) for job in jobs]
 
     monkeypatch.setattr(ade_plane, "make_runs", fake)
     plane = ade_plane.QUICK[0.85]
@@ -555,8 +555,9 @@ def test_seeded_runs_are_points_of_one_sweep(tmp_path):
     jobs = [SimpleNamespace(key=f"axisymmetric/prolate@0.8000/{eps:.4f}", sharp=sharp,
                             branch="prolate", eps=eps, backend="axisymmetric", ade={})
             for eps in (0.08, 0.064)]
-    rows = sharp_limit.make_runs(tmp_path / "sharp", jobs)
-    assert list(rows) == [j.key for j in jobs]
+    made_runs = sharp_limit.make_runs(tmp_path / "sharp", jobs)
+    assert [job for job, _ in made_runs] == jobs
+    rows = {job.key: row for job, row in made_runs}
     points = tmp_path / "sharp" / "sweep" / "points"
     assert sorted(p.name for p in points.iterdir() if p.is_dir()) == sorted(
         sharp_limit.point_name(j.key) for j in jobs)
@@ -566,6 +567,6 @@ def test_seeded_runs_are_points_of_one_sweep(tmp_path):
     assert rows[jobs[0].key]["W"] == alone.final["W"]  # bit for bit
     stamp = (points / sharp_limit.point_name(jobs[0].key) / "summary.json").stat().st_mtime_ns
     again = sharp_limit.make_runs(tmp_path / "sharp", jobs)
-    assert [r["e"] for r in again.values()] == [r["e"] for r in rows.values()]
+    assert [r["e"] for _, r in again] == [r["e"] for r in rows.values()]
     assert (points / sharp_limit.point_name(jobs[0].key) / "summary.json").stat(
     ).st_mtime_ns == stamp
