@@ -213,7 +213,7 @@ def _start_field(scene, phi0) -> tuple:
             raise ModelError("phi0 must be a real field, got complex values")
         initial = {"phi": check_grid_field(phi0, "phi0")}
         scene = scene.with_(ic=FieldIC(grid=initial["phi"]))
-    scene.ic.check(scene.dim)
+        scene.ic.check(scene.dim)
     return scene, initial
 
 
