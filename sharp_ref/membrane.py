@@ -282,11 +282,11 @@ class Result:
 class _Objective:
     """x ↦ energy and constraints of one family: x = (coefficients, S[, r₀]).
 
-    The geometry of the last few x (real, or a complex step) is kept: the optimiser asks for
-    the energy and the constraints, and their gradients, at the same points, and the
-    geometry is most of the cost (the same values, computed once: a solve 1.4-1.7x faster)."""
+    The geometry of the last few x (real, or a gradient's batch of complex steps) is kept:
+    the optimiser asks for the energy and the constraints, and their gradients, at the same
+    points, and the geometry is most of the cost (the same values, computed once)."""
 
-    KEEP = 256  # geometries kept (a gradient's complex steps: one per unknown, ≤ 100)
+    KEEP = 4  # geometries kept: an iterate's and its batch of steps, and the one before
 
     def __init__(self, family, problem: Problem):
         self.family, self.problem = family, problem
