@@ -33,7 +33,9 @@ fixed nor swept, ``[run]`` may set only ``n`` and ``backend_options`` (e.g. the 
     folds = 0                             # optional: end past this many folds
 
 Its row is the branch's last point (``steps``: its number of points; ``end``: the
-parameter there; ``folds``: where it turned); one branch per Dask task.
+parameter there; ``folds``: where it turned); one branch per Dask task. Its points may also
+be listed (below), each with its own ends over [branch]'s: ``branch = {from = 0.7, to =
+0.62}``; a branch starts from its seed, so there is no ``after``.
 
 Points can also be listed one by one, beside the grid of ``[axes]`` or instead of it; a
 listed point may start from another point's end (``after``: its final field, resampled to
@@ -136,7 +138,7 @@ class Point:
         from .scenes import resolve_scene, vesicle_scene
 
         start = {self.branch["param"]: self.branch["from"]} if self.branch else {}
-        if self.base == "vesicle" and self.branch:  # R₀ to fit both ends of the branch
+        if self.base == "vesicle" and self.branch and sharp_seed:  # R₀ to fit both ends
             from .branch import vesicle_for_branch
 
             return vesicle_for_branch({**self.fixed, **self.values, "branch": self.seed},
@@ -220,7 +222,8 @@ class Sweep:
             made[spec["name"]] = point = Point(
                 spec["name"], spec.get("base", self.base), dict(spec["scene"]),
                 {k: v for k, v in self.fixed.items() if k not in spec["scene"]},
-                spec["seed"], {**self.run, **spec["run"]}, after=spec["after"], start=start,
+                spec["seed"], {**self.run, **spec["run"]}, spec.get("branch"),
+                after=spec["after"], start=start,
                 when=tuple(spec["when"]) if spec.get("when") else None)
             out.append(point)
         return out
@@ -305,10 +308,7 @@ def load_sweep(path: str | Path) -> Sweep:
         _scene_keys(base, keys, f"[{table}]")
     run = _run_table(data.get("run", {}), "[run]")
     branch = _branch_table(data.get("branch"), fixed, axes, run)
-    listed = _listed(data.get("points", []), base, seeds, axes)
-    if listed and branch:
-        raise ModelError("[[points]] lists runs; a sweep with a [branch] table follows branches "
-                         "(give them in two sweep files)")
+    listed = _listed(data.get("points", []), base, seeds, axes, branch)
     sweep = Sweep(str(data.get("name", path.stem)), base, axes, dict(fixed), seeds, run, branch,
                   listed)
     check_sweep(sweep)
@@ -346,15 +346,18 @@ def _run_table(run, where: str) -> dict:
     return run
 
 
-#: a listed point's keys
+#: a listed point's keys (a branch sweep's: ``branch`` for ``after`` and ``when``)
 POINT_KEYS = ("name", "base", "seed", "scene", "run", "after", "when")
+BRANCH_POINT_KEYS = ("name", "base", "seed", "scene", "run", "branch")
 
 
-def _listed(points, base: str, seeds: list, axes: dict) -> list[dict]:
+def _listed(points, base: str, seeds: list, axes: dict, branch: dict | None = None
+            ) -> list[dict]:
     """The [[points]] tables, checked for their form: a new plain name each, a seed of the
     sweep's, scene keys (over [scene]; an axis's too: the point is off the grid), run options,
     and ``after`` naming a point made before it (a grid point or one listed above: no cycle
-    can be written)."""
+    can be written). In a branch sweep a point follows its own branch from its seed: its
+    ``branch`` (from, to, step, folds over [branch]) instead of ``after``."""
     if not isinstance(points, list) or not all(isinstance(p, dict) for p in points):
         raise ModelError("points must be a list of tables ([[points]])")
     grid = set()
@@ -363,10 +366,13 @@ def _listed(points, base: str, seeds: list, axes: dict) -> list[dict]:
     out, names = [], set(grid)
     for i, table in enumerate(points, 1):
         where = f"[[points]] #{i}"
-        unknown = sorted(set(table) - set(POINT_KEYS))
+        keys = BRANCH_POINT_KEYS if branch else POINT_KEYS
+        unknown = sorted(set(table) - set(keys))
         if unknown:
             raise ModelError(f"unknown key(s) {', '.join(unknown)} in {where}; valid: "
-                             f"{', '.join(POINT_KEYS)}")
+                             f"{', '.join(keys)}"
+                             + (" (a branch starts from its seed)" if branch and {
+                                 "after", "when"} & set(unknown) else ""))
         name = table.get("name")
         if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._=-]*", name):
             raise ModelError(f"{where} needs a name of letters, digits and . _ - = (its "
@@ -394,9 +400,12 @@ def _listed(points, base: str, seeds: list, axes: dict) -> list[dict]:
         if after is not None and after not in names:
             raise ModelError(f"{where}: after = {after!r} names no point before it (a grid "
                              "point or one listed above)")
-        out.append({"name": name, "base": own, "seed": seed, "scene": dict(scene),
-                    "run": _run_table(table.get("run", {}), where), "after": after,
-                    "when": _when(table.get("when"), after, where)})
+        run = _run_table(table.get("run", {}), where)
+        spec = {"name": name, "base": own, "seed": seed, "scene": dict(scene), "run": run,
+                "after": after, "when": _when(table.get("when"), after, where)}
+        if branch:
+            spec["branch"] = _point_branch(table.get("branch", {}), branch, scene, run, where)
+        out.append(spec)
         names.add(name)
     return out
 
@@ -419,15 +428,7 @@ def _branch_table(table, fixed: dict, axes: dict, run: dict) -> dict | None:
     missing = [k for k in ("param", "from", "to") if k not in table]
     if missing:
         raise ModelError(f"[branch] needs {', '.join(missing)}")
-    out = {"step": 0.01, "folds": None, **table}
-    for key, kind in BRANCH_KEYS.items():
-        value = out[key]
-        if key == "folds" and value is None:
-            continue
-        if kind is float and isinstance(value, int) and not isinstance(value, bool):
-            out[key] = value = float(value)
-        if not isinstance(value, kind) or isinstance(value, bool):
-            raise ModelError(f"branch.{key} must be of type {kind.__name__}, got {value!r}")
+    out = _branch_types({"step": 0.01, "folds": None, **table}, "branch")
     from .branch import PARAMETERS
 
     if out["param"] not in PARAMETERS:
@@ -437,12 +438,47 @@ def _branch_table(table, fixed: dict, axes: dict, run: dict) -> dict | None:
     if where:
         raise ModelError(f"{out['param']} is the branch's parameter ([branch] from, to); it "
                          f"cannot be in {where} too")
+    _branch_run(run, "[run]")
+    return out
+
+
+def _branch_types(table: dict, where: str) -> dict:
+    """A branch table's values of their types (ints as floats where a float is asked)."""
+    out = dict(table)
+    for key, value in table.items():
+        kind = BRANCH_KEYS[key]
+        if key == "folds" and value is None:
+            continue
+        if kind is float and isinstance(value, int) and not isinstance(value, bool):
+            out[key] = value = float(value)
+        if not isinstance(value, kind) or isinstance(value, bool):
+            raise ModelError(f"{where}.{key} must be of type {kind.__name__}, got {value!r}")
+    return out
+
+
+def _branch_run(run: dict, where: str) -> None:
     other = sorted(set(run) - set(BRANCH_RUN_KEYS))
     if other:
-        raise ModelError(f"run option(s) {', '.join(other)}: a branch sweep's [run] takes "
+        raise ModelError(f"run option(s) {', '.join(other)}: a branch sweep's {where} takes "
                          f"only {', '.join(BRANCH_RUN_KEYS)} (each point is Newton's "
                          "continuation, not a run)")
-    return out
+
+
+def _point_branch(table, branch: dict, scene: dict, run: dict, where: str) -> dict:
+    """A listed point's branch in a branch sweep: [branch] with the point's own from, to,
+    step or folds (its parameter is the sweep's)."""
+    if not isinstance(table, dict):
+        raise ModelError(f"{where}: branch must be a table")
+    own = sorted(set(table) - (set(BRANCH_KEYS) - {"param"}))
+    if own:
+        raise ModelError(f"unknown key(s) {', '.join(own)} in {where}: branch; valid: "
+                         f"{', '.join(k for k in BRANCH_KEYS if k != 'param')} (the "
+                         "parameter is [branch]'s)")
+    if branch["param"] in scene:
+        raise ModelError(f"{where}: {branch['param']} is the branch's parameter; give it as "
+                         "branch = {from, to}, not in scene")
+    _branch_run(run, f"{where}: run")
+    return {**branch, **_branch_types(table, f"{where}: branch")}
 
 
 def _when(when, after, where: str) -> list | None:
@@ -484,15 +520,16 @@ def check_sweep(sweep: Sweep) -> None:
         except ModelError as err:
             raise ModelError(f"point {point.name}: {err}") from None
     first = points[0]
-    if sweep.branch:
+    if sweep.branch:  # the first point's scene, each point's ends
         from .branch import check_branch
 
-        b = sweep.branch
-        try:
-            check_branch(first.scene().params, b["param"], b["from"], b["to"], b["step"],
-                         b["folds"])
-        except (ModelError, TypeError) as err:
-            raise ModelError(f"point {first.name}: {err}") from None
+        params = first.scene(sharp_seed=False).params  # (what check_parameter reads)
+        for point in points:
+            b = point.branch
+            try:
+                check_branch(params, b["param"], b["from"], b["to"], b["step"], b["folds"])
+            except (ModelError, TypeError) as err:
+                raise ModelError(f"point {point.name}: {err}") from None
         return
     listed = {spec["name"] for spec in sweep.listed}
     for point in points:  # the first point's run, and each listed point's (its own options)

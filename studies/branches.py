@@ -4,23 +4,26 @@ oblate → stomatocyte transitions as the v where two branches followed by conti
 beside the sharp membrane's (``sharp_ref``) and the seeded steady states' of
 ``studies/sharp_limit.py``.
 
-Each pair of branches is followed at one R₀ (the two branches' ε/R₀ equal): the prolate and
-the oblate at R₀ = 0.17 (the largest at which the prolate at v = 0.62 fits the box), from
-v = 0.70 down to 0.62 (0.645 at ε = 0.005); the oblate and the stomatocyte at R₀ = 0.25 from
-v = 0.62 down to 0.56 (at ε = 0.005: the oblate to 0.58, the stomatocyte from 0.60 to
-0.585): ``PAIRS``. The crossing is
+The branches are the points of a branch sweep, ``studies/sweeps/branches.toml``
+(:mod:`fem_ade.sweep`: one Dask task per branch, two workers): each pair of branches is
+followed at one R₀ (the two branches' ε/R₀ equal), the prolate and the oblate at R₀ = 0.17
+(the largest at which the prolate at v = 0.62 fits the box) from v = 0.70 down to 0.62
+(0.645 at ε = 0.005), the oblate and the stomatocyte at R₀ = 0.25 from v = 0.62 down to
+0.56 (at ε = 0.005: the oblate to 0.58, the stomatocyte from 0.60 to 0.585). The crossing is
 :func:`fem_ade.branch.crossing` (linear between points ~0.002 apart); ε → 0 by Richardson
 with p = 2 (the order every kept branch shows in ``sharp_limit.md``) over
 the two smallest ε with a crossing. The folds (turning points in v) of every branch are
 reported: where a branch ends at finite ε.
 
 Writes ``OUT/branches.md``, ``OUT/branches.json``, ``OUT/branches.png`` and
-``OUT/branches/minimal.json`` (the transitions, ε = 0 for the extrapolation); the branch
-folders in ``OUT/branches/EPS/NAME`` (their ``points/`` are not committed) — resumable, as
-``fem_ade.branch`` is: a finished branch is read back, a stopped one goes on.
+``OUT/branches/minimal.json`` (the transitions, ε = 0 for the extrapolation); the sweep's
+branch folders in ``OUT/branches/points/NAME`` (their ``points/`` are not committed) —
+resumable, as a sweep is: a finished branch is read back, a stopped one goes on.
+``--report-only`` rebuilds the report from the folders.
 
     python studies/branches.py --out studies/results           # ~1 h
     python studies/branches.py --quick                         # the code (a minute)
+    python studies/branches.py --out studies/results --report-only
 
 One thread: ``OPENBLAS_NUM_THREADS=1``, ``FEM_ADE_FFT_WORKERS=1`` unless set.
 """
@@ -37,37 +40,41 @@ import csv  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 OUT = Path("runs") / "studies"
-EPS = (0.02, 0.01, 0.005)
-#: (upper branch, lower branch, R₀, {ε: (v from, v to), or per branch}): the pairs whose
-#: crossing is a transition (at ε = 0.02 the oblates' seeds open into tori). The stomatocyte
-#: at ε = 0.005 starts at v = 0.60: from 0.62 its Newton corrections stop converging at
-#: 0.6123 (studies/results/branches_notes.md)
-PAIRS = (("prolate", "oblate", 0.17, {0.02: (0.70, 0.62), 0.01: (0.70, 0.62),
-                                     0.005: (0.70, 0.645)}),
-         ("oblate", "stomatocyte", 0.25, {0.02: (0.62, 0.56), 0.01: (0.62, 0.56),
-                                          0.005: {"oblate": (0.62, 0.58),
-                                                  "stomatocyte": (0.60, 0.585)}}))
-#: --quick: the same code on short stretches at ε = 0.04 (no crossing expected; the second
-#: pair's seeds are tori there: the exclusion of a seed not on its branch)
-QUICK_PAIRS = (("prolate", "oblate", 0.2, {0.04: (0.90, 0.88)}),
-               ("oblate", "stomatocyte", 0.25, {0.04: (0.62, 0.61)}))
+SWEEPS = Path(__file__).resolve().parent / "sweeps"
+#: the branches (a point per branch, pair and ε; a pair is the points of one R₀, its first
+#: seed the upper branch), and --quick's: the same code on short stretches at ε = 0.04
+SWEEP, QUICK_SWEEP = SWEEPS / "branches.toml", SWEEPS / "branches_quick.toml"
 SHARP = {"prolate → oblate": 0.6511, "oblate → stomatocyte": 0.5912}  # sharp_limit.md
 
 
-def follow_one(out: Path, branch: str, R0: float, eps: float, start: float, stop: float,
-               step: float) -> list[dict]:
-    from fem_ade.branch import follow
-    from fem_ade.scenes import vesicle_scene
+def pairs_of(sweep) -> list[dict]:
+    """The sweep's pairs, in its points' order: each ``{"R0", "branches": (upper, lower),
+    "eps": {ε: {branch: point}}}`` (the points of one R₀)."""
+    pairs = {}
+    for point in sweep.points():
+        R0, eps = point.values["R0"], point.values["eps"]
+        pair = pairs.setdefault(R0, {"R0": R0, "branches": [], "eps": {}})
+        if point.seed not in pair["branches"]:
+            pair["branches"].append(point.seed)
+        pair["eps"].setdefault(eps, {})[point.seed] = point
+    for pair in pairs.values():
+        if len(pair["branches"]) != 2:
+            raise SystemExit(f"branches: the points at R0 = {pair['R0']} are not a pair of "
+                             f"branches: {pair['branches']}")
+    return list(pairs.values())
 
-    folder = out / f"{eps:g}" / f"{branch}-R0={R0:g}"
-    if (folder / "ended").is_file():  # followed to its end before: read back
-        with open(folder / "branch.csv") as fh:
-            return [{k: _num(v) for k, v in r.items()} for r in csv.DictReader(fh)]
-    scene = vesicle_scene(v=start, branch=branch, eps=eps, R0=R0)
-    print(f"{branch} at R0 = {R0}, eps = {eps}: v = {start} -> {stop}", flush=True)
-    rows = follow(scene, param="v", start=start, stop=stop, step=step, out=folder)
-    (folder / "ended").write_text("")
-    return rows
+
+def line(root: Path, point) -> list[dict]:
+    """A branch point's rows (its branch.csv) once it has ended, else none."""
+    from fem_ade.jobs import read_summary
+    from fem_ade.status import Status
+
+    folder = root / "points" / point.name
+    summary = read_summary(folder)
+    if summary is None or summary.get("status") != Status.COMPLETED:
+        return []
+    with open(folder / "branch.csv") as fh:
+        return [{k: _num(v) for k, v in r.items()} for r in csv.DictReader(fh)]
 
 
 def _num(text: str):
@@ -80,59 +87,77 @@ def _num(text: str):
 def main(argv=None) -> dict:
     import sys
 
-    from fem_ade.branch import crossing, same_branch
     from fem_ade.output import write_json_atomic
+    from fem_ade.sweep import load_sweep, report_rows, run_sweep
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from sharp_limit import extrapolate
-
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--quick", action="store_true",
                     help="short stretches at eps = 0.04: the code, not the result")
+    ap.add_argument("--workers", type=int, default=2, help="Dask workers (a branch each)")
+    ap.add_argument("--report-only", action="store_true",
+                    help="from the branches' folders; follow nothing")
     args = ap.parse_args(argv)
-    eps_list, pairs = ((0.04,), QUICK_PAIRS) if args.quick else (EPS, PAIRS)
-    base = args.out / "branches"
-    results = []
-    curves = {}
-    for upper, lower, R0, ranges in pairs:
-        name = f"{upper} → {lower}"
-        row = {"transition": name, "R0": R0, "at": {f"{e:g}": None for e in eps_list},
-               "eps": list(ranges), "sharp": SHARP[name], "ended": {}, "folds": {}}
-        for eps, span in ranges.items():
-            pair = []
-            for b in (upper, lower):
-                start, stop = span[b] if isinstance(span, dict) else span
-                rows = follow_one(base, b, R0, eps, start, stop, 0.01)
-                if rows and not same_branch(b, rows[0]["label"]):
-                    row["ended"][f"{b} {eps:g}"] = (f"its seed relaxed to a shape labelled "
-                                                   f"{rows[0]['label']}: not this branch")
-                    row.setdefault("last_v", {})[f"{b} {eps:g}"] = None
-                    pair.append([])
-                    continue
-                pair.append(rows)
-                curves[(b, R0, eps)] = [(r["v"], r["e"], r["unstable"]) for r in rows]
-                row["ended"][f"{b} {eps:g}"] = (
-                    f"v = {rows[-1]['v']:.4f}, {rows[-1]['label']}"
-                    + (" (the end of its range)" if rows[-1]["v"] <= stop else "")
-                    if rows else "no point")
-                row.setdefault("last_v", {})[f"{b} {eps:g}"] = rows[-1]["v"] if rows else None
-                row["folds"][f"{b} {eps:g}"] = [float(r["fold"]) for r in rows
-                                                 if r.get("fold") not in (None, "")]
-            row["at"][f"{eps:g}"] = crossing(pair[0], pair[1], "v")
-        have = [(e, row["at"][f"{e:g}"]) for e in eps_list if row["at"][f"{e:g}"] is not None]
-        row["extrapolated"] = None
-        if len(have) >= 2:  # p = 2 over the two smallest ε (sharp_limit's, given two)
-            row["extrapolated"] = extrapolate(*zip(*have[-2:], strict=True))[0]
-        results.append(row)
-        print(f"{name}: {row['at']} -> {row['extrapolated']} (sharp {row['sharp']})",
-              flush=True)
-    payload = {"eps": list(eps_list), "pairs": results}
+    sweep = load_sweep(QUICK_SWEEP if args.quick else SWEEP)
     suffix = "_quick" if args.quick else ""
+    base = args.out / f"branches{suffix}"
+    if args.report_only:
+        report_rows(sweep, base)
+    else:
+        run_sweep(sweep, base, workers=args.workers)
+    pairs = pairs_of(sweep)
+    eps_list = list(dict.fromkeys(e for pair in pairs for e in pair["eps"]))
+    results, curves = [], {}
+    for pair in pairs:
+        row = transition(base, pair, eps_list, curves)
+        results.append(row)
+        print(f"{row['transition']}: {row['at']} -> {row['extrapolated']} "
+              f"(sharp {row['sharp']})", flush=True)
+    payload = {"eps": eps_list, "pairs": results}
     write_json_atomic(args.out / f"branches{suffix}.json", payload)
-    write_json_atomic(base / f"minimal{suffix}.json", minimal(payload))
+    write_json_atomic(base / "minimal.json", minimal(payload))
     write_report(args.out, payload, curves, suffix)
     return payload
+
+
+def transition(base: Path, pair: dict, eps_list: list, curves: dict) -> dict:
+    """One pair's row: its crossing at each ε (:func:`fem_ade.branch.crossing`), ε → 0 by
+    Richardson with p = 2 over the two smallest ε with one, where each branch ended and its
+    folds; its branches' (v, e, unstable) added to ``curves``."""
+    from sharp_limit import extrapolate
+
+    from fem_ade.branch import crossing, same_branch
+
+    upper, lower = pair["branches"]
+    name, R0 = f"{upper} → {lower}", pair["R0"]
+    row = {"transition": name, "R0": R0, "at": {f"{e:g}": None for e in eps_list},
+           "eps": list(pair["eps"]), "sharp": SHARP[name], "ended": {}, "folds": {}}
+    for eps, points in pair["eps"].items():
+        both = []
+        for b in (upper, lower):
+            rows, key = line(base, points[b]), f"{b} {eps:g}"
+            if rows and not same_branch(b, rows[0]["label"]):
+                row["ended"][key] = (f"its seed relaxed to a shape labelled "
+                                     f"{rows[0]['label']}: not this branch")
+                row.setdefault("last_v", {})[key] = None
+                both.append([])
+                continue
+            both.append(rows)
+            curves[(b, R0, eps)] = [(r["v"], r["e"], r["unstable"]) for r in rows]
+            stop = points[b].branch["to"]
+            row["ended"][key] = (f"v = {rows[-1]['v']:.4f}, {rows[-1]['label']}"
+                                 + (" (the end of its range)" if rows[-1]["v"] <= stop else "")
+                                 if rows else "no point")
+            row.setdefault("last_v", {})[key] = rows[-1]["v"] if rows else None
+            row["folds"][key] = [float(r["fold"]) for r in rows
+                                 if r.get("fold") not in (None, "")]
+        row["at"][f"{eps:g}"] = crossing(both[0], both[1], "v")
+    have = [(e, row["at"][f"{e:g}"]) for e in eps_list if row["at"][f"{e:g}"] is not None]
+    row["extrapolated"] = None
+    if len(have) >= 2:  # p = 2 over the two smallest ε (sharp_limit's, given two)
+        row["extrapolated"] = extrapolate(*zip(*have[-2:], strict=True))[0]
+    return row
 
 
 def minimal(payload: dict) -> dict:

@@ -5,6 +5,8 @@ killed twice that ends with the table of an uninterrupted one."""
 from __future__ import annotations
 
 import csv
+import json
+import math
 import os
 import signal
 import subprocess
@@ -337,6 +339,58 @@ def test_a_sweep_of_branches(tmp_path, capsys):
     path.write_text(BRANCH_SWEEP.replace("to = 0.92", "to = 0.9"))
     assert main([str(path), "--out", str(out), "--workers", "1", "--quiet"]) == 2
     assert "other settings" in capsys.readouterr().err
+
+
+#: listed branches: one point on the grid, one listed with its own size and end
+LISTED_BRANCHES = BRANCH_SWEEP.replace("R0 = [0.18, 0.2]", "R0 = [0.2]") + """
+[[points]]
+name = "small"
+scene = {R0 = 0.18}
+branch = {to = 0.93, step = 0.01}
+"""
+#: a listed branch point's mistakes: (what is wrong, the change, a word of the message)
+BAD_LISTED_BRANCHES = [
+    ("a start from another point", lambda t: t + 'after = "R0=0.2_seed=prolate"\n',
+     "starts from its seed"),
+    ("the parameter in its scene", lambda t: t.replace("{R0 = 0.18}", "{R0 = 0.18, v = 0.9}"),
+     "branch's parameter"),
+    ("its own parameter", lambda t: t.replace("{to = 0.93", '{param = "da0", to = 0.93'),
+     "unknown key"),
+    ("a step too long for its ends", lambda t: t.replace("step = 0.01}", "step = 0.05}"),
+     "point small: --step"),
+    ("a run option", lambda t: t + 'run = {recipe = "steady"}\n', "takes only"),
+]
+
+
+def test_listed_branches(tmp_path):
+    """A branch sweep's listed point follows its own branch: its size from its scene, its
+    ends and step over [branch]'s (its branch.json records them), beside the grid's."""
+    path = tmp_path / "b.toml"
+    path.write_text(LISTED_BRANCHES)
+    out = tmp_path / "out"
+    assert main([str(path), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    rows = {r["point"]: r for r in _table(out / "sweep.csv")}
+    assert set(rows) == {"R0=0.2_seed=prolate", "small"}
+    small = _table(out / "points" / "small" / "branch.csv")
+    record = json.loads((out / "points" / "small" / "branch.json").read_text())
+    assert (record["from"], record["step"]) == (0.95, 0.01)
+    assert record["params"]["beta"] == pytest.approx(4 * math.pi * 0.18**2)  # area 4πR₀²
+    assert float(small[0]["v"]) == pytest.approx(0.95, abs=1e-9)
+    assert float(rows["small"]["end"]) <= 0.93 < float(small[-2]["v"])
+    assert int(rows["small"]["steps"]) == len(small)
+    assert float(rows["R0=0.2_seed=prolate"]["end"]) <= 0.92
+
+
+@pytest.mark.parametrize("case", BAD_LISTED_BRANCHES, ids=[c[0] for c in BAD_LISTED_BRANCHES])
+def test_bad_listed_branches_are_one_line(tmp_path, capsys, case):
+    _, change, word = case
+    path = tmp_path / "b.toml"
+    path.write_text(change(LISTED_BRANCHES))
+    out = tmp_path / "out"
+    code = main([str(path), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and word in err, err
+    assert not out.exists(), "a refused sweep wrote something"
 
 
 @pytest.mark.parametrize("case", BAD_BRANCH_SWEEPS, ids=[c[0] for c in BAD_BRANCH_SWEEPS])
