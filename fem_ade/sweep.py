@@ -512,7 +512,8 @@ def check_sweep(sweep: Sweep) -> None:
             if point.base == "vesicle":
                 from .vesicle import Vesicle
 
-                Vesicle(**point.fixed, **point.values, branch=point.seed).check()
+                start = {point.branch["param"]: point.branch["from"]} if point.branch else {}
+                Vesicle(**point.fixed, **point.values, **start, branch=point.seed).check()
             elif point is points[0]:
                 pass  # built below
         except TypeError as err:
@@ -632,9 +633,11 @@ def _start(point: Point, root: Path) -> Path | dict | None:
 
 def _follow(point: Point, folder: Path) -> None:
     """A branch point: the branch followed (or gone on with, after a kill) in ``folder``,
-    then its summary.json (status ``completed``: it is not followed again)."""
+    then its summary.json (status ``completed``: it is not followed again; ``seconds``: this
+    call's wall time, its seed included)."""
     from .branch import follow
 
+    t0 = time.perf_counter()
     b = point.branch
     rows = follow(point.scene(), param=b["param"], start=b["from"], stop=b["to"],
                   step=b["step"], out=folder, n=point.run.get("n"),
@@ -643,7 +646,8 @@ def _follow(point: Point, folder: Path) -> None:
     last = rows[-1]
     write_json_atomic(folder / "summary.json", {
         "status": Status.COMPLETED, "branch": b, "points": len(rows), "end": last[b["param"]],
-        "folds": [r["fold"] for r in rows if r.get("fold")], "last": last}, make_folder=True)
+        "folds": [r["fold"] for r in rows if r.get("fold")], "last": last,
+        "seconds": round(time.perf_counter() - t0, 1)}, make_folder=True)
 
 
 def changed(point: Point, root: Path) -> str | None:

@@ -19,12 +19,21 @@ branch continued along a finer m₀ grid).
   sharp: linear between the m₀ grid's points — the difference of two branches' e is nearly
   linear in m₀, as each is w + q(da − m₀)² with da slowly varying).
 
-Writes ``OUT/ade_branches.md``, ``OUT/ade_branches.json`` and ``OUT/ade-branches.png``; the
-branch folders in ``OUT/ade_branches/v=V/BRANCH`` (their ``points/`` not committed) and the
-sharp solves in ``OUT/ade_branches/sharp/`` — resumable: a finished line is read back.
+The lines are the points of one branch sweep built from this plan (:mod:`fem_ade.sweep`,
+``OUT/ade_branches/sweep/points/v=V_LINE``: a Dask task per line, resumable, a line that
+cannot start recorded with its reason; the pear's seed is made here, as its point's own
+scene). As the sweep ends, each line's rows (or why it has none) and its seconds are
+archived in ``OUT/ade_branches/lines.json`` under what the line is (:func:`line_key`): an
+archived line is not followed again, and the report is made from the archive.
+
+Writes ``OUT/ade_branches.md``, ``OUT/ade_branches.json`` and ``OUT/ade-branches.png``,
+``OUT/ade_branches/lines.json``, the lines' R₀ (``R0.json``) and the sharp solves in
+``OUT/ade_branches/sharp/`` (a cache file per branch and v). ``--report-only`` rebuilds the
+report from those three, solving and following nothing.
 
     python studies/ade_branches.py --out studies/results        # ~1 h on 2 cores
     python studies/ade_branches.py --quick                      # the code (a few minutes)
+    python studies/ade_branches.py --out studies/results --report-only
 
 Two processes (``--workers``), each with one BLAS thread and one FFT worker.
 """
@@ -40,7 +49,6 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import sys  # noqa: E402
-import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
@@ -131,34 +139,108 @@ def line_sizes(base: Path, v_list, eps: float, branches) -> dict:
     return known
 
 
-def pf_line(out: str, branch: str, v: float, R0: float, eps: float, span, step) -> dict:
-    """One branch followed in Δa₀ at one v (a worker's task): its rows, or why it has none."""
-    from fem_ade.branch import follow
+def line_key(v: float, branch: str, name: str, span, R0: float, eps: float, step) -> dict:
+    """What a phase-field line is (its archived rows are reused only for the same): the
+    branch followed in Δa₀ over ``span`` at v, R₀, ε and κ̄, its step, and the model's
+    physics version."""
+    from fem_ade.model import PHYSICS_VERSION
+
+    return {"v": v, "branch": branch, "line": name, "from": span[0], "to": span[1],
+            "R0": R0, "eps": eps, "kbar": KBAR, "step": step, "physics": PHYSICS_VERSION}
+
+
+def line_name(v: float, name: str) -> str:
+    """A line's point in the sweep (its folder's name)."""
+    return f"v={v:g}_{name}"
+
+
+def line_point(key: dict) -> dict:
+    """A line as a listed point of the branch sweep: the vesicle of its branch at the line's
+    start, or the pear's seed made here (:func:`pear_scene`) as the point's own scene;
+    ModelError where the pear has none."""
+    branch = {"param": "da0", "from": key["from"], "to": key["to"], "step": key["step"],
+              "folds": 0}
+    spec = {"name": line_name(key["v"], key["line"]), "seed": key["branch"], "run": {},
+            "after": None, "when": None, "branch": branch, "base": "vesicle",
+            "scene": {"v": key["v"], "kbar": KBAR, "eps": key["eps"], "R0": key["R0"]}}
+    if key["branch"] == "pear":
+        from fem_ade.scenes import scene_to_mapping
+
+        spec.update(base=scene_to_mapping(pear_scene(key["v"], key["from"], key["eps"],
+                                                     key["R0"])), scene={})
+    return spec
+
+
+def pear_scene(v: float, m0: float, eps: float, R0: float):
+    """The pear's seed at Δa₀ = ``m0``: the ``vesicle`` family's, or where ``sharp_ref`` finds
+    no pear there from scratch, :func:`continued_pear`."""
     from fem_ade.model import ModelError
     from fem_ade.scenes import vesicle_scene
 
-    folder = Path(out)
-    t0 = time.perf_counter()
-    if (folder / "ended.json").is_file():
-        return json.loads((folder / "ended.json").read_text())
-    start, stop = span
     try:
+        return vesicle_scene(v=v, da0=m0, kbar=KBAR, eps=eps, branch="pear", R0=R0)
+    except ModelError:
+        return continued_pear(v, m0, eps, R0)
+
+
+def run_lines(base: Path, keys: list[dict], archive: dict, workers: int) -> None:
+    """Follow the lines not in ``archive`` (or archived with another key) as one branch
+    sweep in ``base/sweep`` (:mod:`fem_ade.sweep`: a Dask task per line, resumable, a
+    failure recorded with its reason), and archive each line's outcome in
+    ``base/lines.json`` as soon as the sweep has ended (:func:`archive_line`)."""
+    from fem_ade.model import ModelError
+    from fem_ade.output import write_json_atomic
+    from fem_ade.sweep import Sweep, check_sweep, run_sweep
+
+    specs, todo = [], []
+    for key in keys:
+        name = line_name(key["v"], key["line"])
+        if archive.get(name, {}).get("key") == key:
+            continue
         try:
-            scene = vesicle_scene(v=v, da0=start, kbar=KBAR, eps=eps, branch=branch, R0=R0)
-        except ModelError:
-            if branch != "pear":
-                raise
-            scene = continued_pear(v, start, eps, R0)
-        rows = follow(scene, param="da0", start=start, stop=stop, step=step, out=folder,
-                      quiet=True, folds=0)
-        result = {"rows": [_plain(r) for r in rows], "missing": None}
-    except ModelError as err:
-        result = {"rows": [], "missing": str(err)}
-    result.update(branch=branch, v=v, R0=R0, eps=eps,
-                  seconds=round(time.perf_counter() - t0, 1))
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "ended.json").write_text(json.dumps(result))
-    return result
+            specs.append(line_point(key))
+            todo.append(key)
+        except ModelError as err:  # no pear to start from, even by continuation
+            archive[name] = {"key": key, "rows": [], "missing": str(err), "seconds": None}
+    if specs:
+        seeds = list(dict.fromkeys(spec["seed"] for spec in specs))
+        sweep = Sweep(base.name, "vesicle", {}, {}, seeds, {}, specs[0]["branch"],
+                      listed=specs)
+        check_sweep(sweep)
+        run_sweep(sweep, base / "sweep", workers=workers, quiet=True)
+    for key in todo:
+        name = line_name(key["v"], key["line"])
+        archive[name] = archive_line(base / "sweep" / "points" / name, key)
+    write_json_atomic(base / "lines.json", archive, indent=None, make_folder=True)
+
+
+def archive_line(folder: Path, key: dict) -> dict:
+    """A followed line's archive entry: its rows (branch.csv, the columns the report reads),
+    or why it has none (its failure record's reason), and its seconds (the task's wall
+    time: the seed and every Newton point)."""
+    import csv
+
+    from fem_ade.jobs import failure_record, read_failure, read_summary
+
+    failed, summary = read_failure(folder), read_summary(folder)
+    if failed is not None or summary is None:
+        reason = failed["reason"] if failed else "not run"
+        record = json.loads(failure_record(folder).read_text()) if failed else {}
+        return {"key": key, "rows": [], "seconds": record.get("seconds"),
+                "missing": reason.removeprefix("ModelError: ")}
+    with open(folder / "branch.csv") as fh:
+        rows = [_plain({k: _value(x) for k, x in r.items()}) for r in csv.DictReader(fh)]
+    return {"key": key, "rows": rows, "missing": None, "seconds": summary.get("seconds")}
+
+
+def _value(text: str):
+    """A branch.csv cell as it was written: an int, a float or text ('' for no fold)."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
 
 
 def continued_pear(v: float, m0: float, eps: float, R0: float):
@@ -379,42 +461,27 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="one short line at eps = 0.04")
+    ap.add_argument("--report-only", action="store_true",
+                    help="from the archived lines and sharp solves; solve and follow nothing")
     args = ap.parse_args(argv)
     q = args.quick
     eps, v_list, da0_list = (QUICK.eps, QUICK.v, QUICK.da0) if q else (EPS, V, DA0)
     branches, step = (QUICK.branches, QUICK.step) if q else (BRANCHES, STEP)
-    grid = QUICK.sharp_m0 if q else SHARP_M0
     base = args.out / ("ade_branches_quick" if q else "ade_branches")
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import ade_branches as tasks  # the workers' functions, by a name they can import
-
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        sharp_jobs = {(v, b): pool.submit(tasks.sharp_line,
-                                          str(base / "sharp" / f"{b}-v={v:g}.json"), b, v, grid)
-                      for v in v_list for b in branches}
+    grid = QUICK.sharp_m0 if q else SHARP_M0
+    if args.report_only:
+        sharp, R0 = archived_sharp(base, v_list, branches), archived_sizes(base, v_list)
+    else:
+        sharp = sharp_lines(base, v_list, branches, grid, args.workers)
         R0 = line_sizes(base, v_list, eps, branches)
-        sharp = {v: {} for v in v_list}
-        for (v, b), job in sharp_jobs.items():
-            sharp[v][b] = job.result()["rows"]
-            print(f"sharp {b} at v = {v}: {len(sharp[v][b])} points", flush=True)
-        spans = {(v, b): line_spans(b, sharp[v].get(b, []), q)
-                 for v in v_list for b in branches}
-        jobs = {(v, b, name): pool.submit(tasks.pf_line, str(base / f"v={v:g}" / name), b, v,
-                                          R0[v], eps, span, step)
-                for (v, b), lines in spans.items() for name, span in lines}
-        pf = {v: {b: {"lines": [], "seconds": 0.0} for b in branches} for v in v_list}
-        for (v, b), lines in spans.items():
-            if not lines:  # (only the pear has none: where there is no sharp pear)
-                pf[v][b]["lines"].append({"name": b, "rows": [], "missing":
-                                          "no sharp pear on this line to start from"})
-        for (v, b, name), job in jobs.items():
-            res = job.result()
-            pf[v][b]["lines"].append({"name": name, "rows": res["rows"],
-                                      "missing": res["missing"]})
-            pf[v][b]["seconds"] += res["seconds"]
-            print(f"phase field {name} at v = {v} (R0 = {R0[v]}): {len(res['rows'])} points, "
-                  f"{res['seconds']} s" + (f"; {res['missing']}" if res["missing"] else ""),
-                  flush=True)
+    spans = {(v, b): line_spans(b, sharp[v].get(b, []), q) for v in v_list for b in branches}
+    keys = [line_key(v, b, name, span, R0[v], eps, step)
+            for (v, b), lines in spans.items() for name, span in lines]
+    path = base / "lines.json"
+    archive = json.loads(path.read_text()) if path.is_file() else {}
+    if not args.report_only:
+        run_lines(base, keys, archive, args.workers)
+    pf = gathered(spans, keys, archive, R0)
     result = plane(pf, sharp, v_list, da0_list)
     result.update(eps=eps, kbar=KBAR, R0={f"{v:g}": R0[v] for v in v_list},
                   line_seconds=round(sum(r["seconds"] for v in v_list
@@ -427,6 +494,76 @@ def main(argv=None) -> dict:
     agree = sum(p["pf"] == p["sharp"] for p in result["points"] if p["sharp"])
     print(f"lowest branch as the sharp one's at {agree} of {len(result['points'])} points")
     return result
+
+
+def sharp_lines(base: Path, v_list, branches, grid, workers: int) -> dict:
+    """{v: {branch: rows}}: each sharp branch continued along the m₀ grid, one task per
+    (v, branch) on ``workers`` processes, each kept in ``base/sharp/BRANCH-v=V.json``
+    (:func:`sharp_line`; a kept one is read back). These are ``sharp_ref`` solves, not runs:
+    a cache file each, as the sharp-limit study keeps its solves, so they are not sweep
+    points."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import ade_branches as tasks  # the workers' functions, by a name they can import
+
+    sharp = {v: {} for v in v_list}
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        jobs = {(v, b): pool.submit(tasks.sharp_line, str(base / "sharp" / f"{b}-v={v:g}.json"),
+                                    b, v, grid) for v in v_list for b in branches}
+        for (v, b), job in jobs.items():
+            sharp[v][b] = job.result()["rows"]
+            print(f"sharp {b} at v = {v}: {len(sharp[v][b])} points", flush=True)
+    return sharp
+
+
+def archived_sharp(base: Path, v_list, branches) -> dict:
+    """--report-only: the kept sharp lines (ModelError where one is missing)."""
+    from fem_ade.model import ModelError
+
+    sharp = {v: {} for v in v_list}
+    for v in v_list:
+        for b in branches:
+            path = base / "sharp" / f"{b}-v={v:g}.json"
+            if not path.is_file():
+                raise ModelError(f"{path} is missing: run the study (without --report-only)")
+            sharp[v][b] = json.loads(path.read_text())["rows"]
+    return sharp
+
+
+def archived_sizes(base: Path, v_list) -> dict:
+    """--report-only: each line's R₀ as kept in ``base/R0.json``."""
+    from fem_ade.model import ModelError
+
+    path = base / "R0.json"
+    known = {float(k): x for k, x in json.loads(path.read_text()).items()} \
+        if path.is_file() else {}
+    missing = [v for v in v_list if v not in known]
+    if missing:
+        raise ModelError(f"{path} has no R0 for v = {missing}: run the study first")
+    return known
+
+
+def gathered(spans: dict, keys: list[dict], archive: dict, R0: dict) -> dict:
+    """{v: {branch: {"lines": [...], "seconds"}}}: each line's archived rows, or why it has
+    none (a line not archived with its key: not followed)."""
+    pf = {v: {b: {"lines": [], "seconds": 0.0} for (w, b) in spans if w == v}
+          for v, _ in spans}
+    for (v, b), lines in spans.items():
+        if not lines:  # (only the pear has none: where there is no sharp pear)
+            pf[v][b]["lines"].append({"name": b, "rows": [], "missing":
+                                      "no sharp pear on this line to start from"})
+    for key in keys:
+        v, b, name = key["v"], key["branch"], key["line"]
+        res = archive.get(line_name(v, name))
+        if res is None or res["key"] != key:
+            res = {"rows": [], "missing": "not followed (no archived line with its "
+                                          "settings)", "seconds": None}
+        pf[v][b]["lines"].append({"name": name, "rows": res["rows"],
+                                  "missing": res["missing"]})
+        pf[v][b]["seconds"] += res["seconds"] or 0.0
+        print(f"phase field {name} at v = {v} (R0 = {R0[v]}): {len(res['rows'])} points, "
+              f"{res['seconds']} s" + (f"; {res['missing']}" if res["missing"] else ""),
+              flush=True)
+    return pf
 
 
 def write_report(out: Path, result: dict, pf: dict, sharp: dict, suffix: str) -> None:

@@ -7,7 +7,7 @@ cores (the gallery most of them); ``--only`` picks studies, ``--dry-run`` prints
 commands, each with the sweeps it runs (:data:`SWEEPS`). The studies that keep run
 folders (the gallery, the constraints and sharp-limit studies, the non-axisymmetric check,
 the sweeps' points) make them through :func:`fem_ade.jobs.ensure`, so a killed regeneration
-goes on where it stopped; nine rebuild their committed report from their committed rows
+goes on where it stopped; ten rebuild their committed report from their committed rows
 with ``--report-only`` (``tests/test_studies.py`` checks it byte for byte).
 
     python studies/regenerate.py --dry-run
@@ -48,18 +48,19 @@ STEPS = (
 #: the sweeps a study runs through fem_ade.sweep: its sweep files, or the sweep it builds
 #: from its plan (the gallery: a listed point per case, a kick after each; the
 #: non-axisymmetric check: a point per 3D run, its revolved scene as its base; the sharp
-#: limit and the ADE plane: a point per seeded run, its scene as its base). The others are
+#: limit and the ADE plane: a point per seeded run, its scene as its base; the ADE lines: a
+#: branch per line of fixed v, the pear's seed as its base). The others are
 #: measurements — timings and errors of runs made in one process (convergence, cost, bench,
 #: scaling, sweep_scaling, hard_cases, readme_figure) — or runs still made by their own
-#: loops over fem_ade.jobs.ensure: ade_branches (Newton's branch lines),
-#: constraints_study (its Δt from a trial's measurement)
+#: loop over fem_ade.jobs.ensure: constraints_study (its Δt from a trial's measurement)
 SWEEPS = {"gallery": ("built from its plan: studies/gallery.py point_spec, kick_spec",),
           "sharp_limit": ("built per stage: studies/sharp_limit.py make_runs",),
           "eps_ladder": ("studies/sweeps/eps_ladder.toml",),
           "ade_plane": ("built from its planes: studies/sharp_limit.py make_runs",),
           "nonaxisymmetric": ("built from its cases: studies/nonaxisymmetric.py point_spec",),
           "phase_diagram": ("studies/sweeps/minimal.toml", "studies/sweeps/ade.toml"),
-          "branches": ("studies/sweeps/branches.toml",)}
+          "branches": ("studies/sweeps/branches.toml",),
+          "ade_branches": ("built from its lines: studies/ade_branches.py line_point",)}
 
 
 def main(argv=None) -> dict:

@@ -470,7 +470,7 @@ def test_package_verdicts_are_the_committed_gallerys():
 #: that made it; phase_diagram's (30 s of sharp solves) runs with -m slow
 REPORTS = {"constraints_study": [], "sharp_limit": [], "gallery": [], "ade_plane": [],
            "axisymmetric": [], "nonaxisymmetric": ["--eps", "0.02"], "eps_ladder": [],
-           "phase_diagram": [], "branches": []}
+           "phase_diagram": [], "branches": [], "ade_branches": []}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)

@@ -362,6 +362,20 @@ BAD_LISTED_BRANCHES = [
 ]
 
 
+def test_a_vesicle_branch_in_da0_is_checked_at_its_start(tmp_path):
+    """A vesicle sweep of branches in Δa₀: each point's vesicle is checked with Δa₀ at the
+    branch's start (it was checked without it, and refused as κ̄ without Δa₀)."""
+    path = tmp_path / "b.toml"
+    path.write_text(BRANCH_SWEEP.replace("eps = 0.05", "eps = 0.05\nkbar = 1.4\nv = 0.85")
+                    .replace('param = "v"', 'param = "da0"').replace("from = 0.95", "from = 1.04")
+                    .replace("to = 0.92", "to = 1.1"))
+    sweep = load_sweep(path)
+    assert [p.branch["from"] for p in sweep.points()] == [1.04, 1.04]
+    path.write_text(path.read_text().replace("kbar = 1.4", "kbar = -1.0"))
+    with pytest.raises(ModelError, match="kbar"):
+        load_sweep(path)
+
+
 def test_listed_branches(tmp_path):
     """A branch sweep's listed point follows its own branch: its size from its scene, its
     ends and step over [branch]'s (its branch.json records them), beside the grid's."""
