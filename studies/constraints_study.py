@@ -23,14 +23,17 @@ Each case then runs with ``until_steady=1e-6`` (relative change of E_M per step,
 over a record interval) and a cap ``max_steps`` chosen from the step cost measured in the
 trial so that one run takes about ``--budget`` seconds at most (the trial's outcome waits in
 the case's trial.json until case.json holds it, so that a case interrupted after its trial
-does not repeat it). Results go to
-``OUT/constraints/<scene>-<variant>/`` (history.csv, summary.json, shape.png, history.png);
-the far-field (bulk) value of φ and the volume it carries are measured from the final φ
-(:func:`bulk_offset`) and stored in case.json; final.npz and run.json are deleted if larger
-than 1 MB (``--clean`` deletes every final.npz, run.json and checkpoint.npz afterwards, so the
-committed results stay small). ``OUT/constraints.md`` gets the tables; the hand-written
-observations in ``OUT/constraints/notes.md`` (if present) are
-included in it verbatim.
+does not repeat it). The trials run one after another (their step costs are measured with
+nothing beside them); the runs then run as one sweep of listed points on ``--workers`` Dask
+processes (:mod:`fem_ade.sweep`; the run folders ``OUT/constraints/sweep/points/NAME``,
+resumable, a failure recorded with its reason). As the sweep ends, each case's results go
+to ``OUT/constraints/<scene>-<variant>/`` (case.json, and the run's summary.json and
+shape.png); the far-field (bulk) value of φ and the volume it carries are measured from
+the final φ (:func:`bulk_offset`) and stored in case.json; final.npz and run.json are
+deleted if larger than 1 MB (``--clean`` deletes every final.npz, run.json and
+checkpoint.npz afterwards, so the committed results stay small). ``OUT/constraints.md``
+gets the tables; the hand-written observations in ``OUT/constraints/notes.md`` (if present)
+are included in it verbatim.
 
     python studies/constraints_study.py                 # until_steady 1e-6 (~4 min, 2 cores)
     python studies/constraints_study.py --long --tol 1e-8 --budget 170   # stricter (~15 min)
@@ -284,40 +287,6 @@ def fallback_dt(log: list[dict]) -> float:
     return min(runs, key=lambda e: (e["rises"], -e["dt"]))["dt"]
 
 
-def run_case(
-    name: str,
-    variant: str,
-    out_root: Path,
-    *,
-    quick: bool,
-    budget: float,
-    trial_steps: int,
-    every: int,
-    tol: float,
-    quiet: bool,
-    subdir: str = "constraints",
-) -> dict:
-    """One case: its Δt trial, then its run (skipped when the case has finished); returns
-    its case.json."""
-    from fem_ade.jobs import status_of
-    from fem_ade.status import ENDED
-
-    out = out_root / subdir / f"{name}-{variant}"
-    if (out / "case.json").is_file() and status_of(out) in ENDED:  # finished: not run again
-        return json.loads((out / "case.json").read_text())
-    n, extra = SCENES[name]
-    if quick:
-        n = 16
-    case, dt = trial_stage(name, variant, out, n, extra, trial_steps=trial_steps, every=every,
-                           tol=tol, allow=quick)
-    if not math.isfinite(dt):
-        case.update(status="no stable dt", dt=math.nan)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "case.json").write_text(json.dumps(case, indent=1, default=str))
-        return case
-    return run_stage(case, dt, out, quick=quick, budget=budget, quiet=quiet)
-
-
 def trial_stage(name: str, variant: str, out: Path, n: int, extra: dict, *, trial_steps: int,
                 every: int, tol: float, allow: bool) -> tuple[dict, float]:
     """The case's record so far (its settings and Δt trials) and the Δt to run at (NaN: no
@@ -358,40 +327,68 @@ def _kept_trial(out: Path, case: dict) -> tuple[dict, float] | None:
     return (old, dt) if same else None
 
 
-def run_stage(case: dict, dt: float, out: Path, *, quick: bool, budget: float,
-              quiet: bool) -> dict:
-    """Run the case at ``dt`` into ``out`` (or find its run there), measure the bulk offset,
-    drop large files and write case.json; returns the case."""
-    from fem_ade.jobs import ensure
+def case_point(case: dict, dt: float, *, quick: bool, budget: float) -> tuple[dict, dict]:
+    """The case's production run as a listed point of the pass's sweep (its scene, variant
+    and Δt, and a cap ``max_steps`` from the trial's step cost so that it takes about
+    ``budget`` seconds) and the run's length options (``until_steady`` and ``max_steps``, or
+    ``steps`` for ``--quick``)."""
+    from fem_ade.scenes import scene_to_mapping
 
     name, variant, n, every = case["scene"], case["variant"], case["n"], case["every"]
-    scene = scene_for(name, variant)
     ms = [e["ms_per_step"] for e in case["trials"] if e["dt"] == dt][0]
     if quick:
         run_kw = {"steps": 20}
     else:
         cap = int(budget / (1.3 * ms * 1e-3)) // every * every
         run_kw = {"until_steady": case["tol"], "max_steps": max(cap, every)}
-    if not quiet:
-        print(
-            f"  {name}-{variant}: dt = {dt:.3g} ({dt / scene.dt:g}x paper), "
-            f"{ms:.2f} ms/step in trial, {run_kw}",
-            flush=True,
-        )
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "trial.json").write_text(json.dumps({"case": case, "dt": dt}, default=str))
-    done = ensure(out, scene, options=dict(dt=dt, every=10 if quick else every, **run_kw,
-                                           **common_kwargs(name, variant, n, case["extra"],
-                                                           quick)),
-                  restart=True).check()
-    bulk = _final_bulk(out, scene.params)
+    print(f"  {name}-{variant}: dt = {dt:.3g} ({dt / scene_for(name, variant).dt:g}x paper), "
+          f"{ms:.2f} ms/step in trial, {run_kw}", flush=True)
+    kw = common_kwargs(name, variant, n, case["extra"], quick)
+    seed = kw.pop("seed", 0)
+    kw.pop("quiet")
+    run = dict(dt=dt, every=10 if quick else every, **run_kw, **kw, render=True)
+    spec = {"name": f"{name}-{variant}", "base": scene_to_mapping(scene_for(name, variant)),
+            "seed": seed, "scene": {}, "run": run, "after": None, "when": None}
+    return spec, run_kw
+
+
+def run_points(specs: list[dict], root: Path, workers: int) -> None:
+    """The pass's production runs as one sweep of listed points in ``root``
+    (:mod:`fem_ade.sweep`: ``root/points/NAME``, on ``workers`` Dask processes, resumable,
+    a failure recorded with its reason)."""
+    from fem_ade.sweep import Sweep, check_sweep, run_sweep
+
+    seeds = sorted({spec["seed"] for spec in specs})
+    sweep = Sweep(root.parent.name, "vesicle", {}, {}, seeds, {}, listed=specs)
+    check_sweep(sweep)
+    run_sweep(sweep, root, workers=workers, quiet=True)
+
+
+def finish_case(case: dict, dt: float, out: Path, run: Path, run_kw: dict) -> dict:
+    """A case whose run in ``run`` has ended: the bulk offset measured, large files dropped,
+    the run's summary.json and shape.png beside case.json in ``out`` (what the report and
+    the results keep), case.json written; a failed run's reason as a ModelError."""
+    import shutil
+
+    from fem_ade.jobs import read_failure, read_summary
+    from fem_ade.model import ModelError
+
+    summary, failed = read_summary(run), read_failure(run)
+    if summary is None or failed is not None:
+        reason = failed["reason"] if failed else "not run"
+        raise ModelError(f"{case['scene']}-{case['variant']}: {reason}")
+    scene = scene_for(case["scene"], case["variant"])
+    bulk = _final_bulk(run, scene.params)
     for f in ("final.npz", "run.json"):
-        fp = out / f
+        fp = run / f
         if fp.is_file() and fp.stat().st_size > BIG:
             fp.unlink()
-    case.update(_run_record(done.summary, run_history(out), scene, dt, run_kw), bulk=bulk)
+    for f in ("summary.json", "shape.png"):
+        if (run / f).is_file():
+            shutil.copy2(run / f, out / f)
+    case.update(_run_record(summary, run_history(run), scene, dt, run_kw), bulk=bulk)
     (out / "case.json").write_text(json.dumps(case, indent=1, default=str))
-    (out / "trial.json").unlink()  # case.json has it now
+    (out / "trial.json").unlink(missing_ok=True)  # case.json has it now
     return case
 
 
@@ -462,7 +459,7 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
     from fem_ade.jobs import status_of
     from fem_ade.status import ENDED
 
-    src = out_root / "constraints" / "long" / "discocyte-exact" / "final.npz"
+    src = run_folder(out_root / "constraints" / "long" / "discocyte-exact") / "final.npz"
     with np.load(src) as z:
         phi0 = np.array(z["phi"])
     rep_path = out_root / "constraints" / "check" / "continuation.json"
@@ -596,7 +593,7 @@ def add_bulk(case_dir: Path) -> bool:
 
     from fem_ade.scenes import get_scene
 
-    cj, fz = case_dir / "case.json", case_dir / "final.npz"
+    cj, fz = case_dir / "case.json", run_folder(case_dir) / "final.npz"
     if not (cj.is_file() and fz.is_file()):
         return False
     c = json.loads(cj.read_text())
@@ -608,6 +605,13 @@ def add_bulk(case_dir: Path) -> bool:
     c["bulk"] = bulk_offset(phi, p.L, p.eps, p.alpha, p.beta)
     cj.write_text(json.dumps(c, indent=1, default=str))
     return True
+
+
+def run_folder(case_dir: Path) -> Path:
+    """Where a case's run is: its pass's ``sweep/points/NAME``, or the case folder itself
+    where it was run before the runs were a sweep (and its final.npz is still there)."""
+    run = case_dir.parent / "sweep" / "points" / case_dir.name
+    return case_dir if (case_dir / "final.npz").is_file() and not run.is_dir() else run
 
 
 def clean(root: Path) -> list[Path]:
@@ -908,6 +912,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="with --check: only these continuations (the others' results are kept)",
     )
     ap.add_argument("--report-only", action="store_true")
+    ap.add_argument("--workers", type=int, default=2,
+                    help="Dask workers of the production runs (the trials run one at a time)")
     ap.add_argument(
         "--dt-trial",
         action="store_true",
@@ -973,33 +979,57 @@ def measure_and_clean(root: Path) -> None:
 
 def run_cases(args: argparse.Namespace, out_root: Path, scenes, variants, *,
               trial_steps: int, every: int) -> list[dict]:
-    """Run each case of ``scenes`` × ``variants`` into the pass's folder (``--long``: the
-    confirmation pass), printing each as it ends; returns their case.json."""
+    """Each case of ``scenes`` × ``variants`` in the pass's folder (``--long``: the
+    confirmation pass): its Δt trial, one after another (their step costs are measured
+    with nothing beside them), then the production runs of those without a case.json as
+    one sweep in ``PASS/sweep`` (:func:`run_points`), each finished into its case folder
+    as the sweep ends (:func:`finish_case`); prints each; returns their case.json (a run
+    that failed: SystemExit with the reasons, after the others are written)."""
+    from fem_ade.jobs import status_of
+    from fem_ade.model import ModelError
+    from fem_ade.status import ENDED
+
     subdir = SETS[1][0] if args.long else SETS[0][0]
-    (out_root / subdir).mkdir(parents=True, exist_ok=True)
+    root = out_root / subdir
+    root.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    cases = []
+    cases, pending = {}, []
     for name in scenes:
         for variant in variants:
-            c = run_case(
-                name,
-                variant,
-                out_root,
-                quick=args.quick,
-                budget=args.budget,
-                trial_steps=trial_steps,
-                every=every,
-                tol=args.tol,
-                quiet=False,
-                subdir=subdir,
-            )
-            cases.append(c)
-            print(
-                f"{name}-{variant}: {c['status']} after {c.get('steps')} steps, "
-                f"{c.get('wall_s', 0):.1f} s; elapsed {time.perf_counter() - t0:.0f} s",
-                flush=True,
-            )
-    return cases
+            out = root / f"{name}-{variant}"
+            if (out / "case.json").is_file() and status_of(out) in ENDED:  # not run again
+                cases[out.name] = json.loads((out / "case.json").read_text())
+                continue
+            n = 16 if args.quick else SCENES[name][0]
+            case, dt = trial_stage(name, variant, out, n, SCENES[name][1],
+                                   trial_steps=trial_steps, every=every, tol=args.tol,
+                                   allow=args.quick)
+            out.mkdir(parents=True, exist_ok=True)
+            if not math.isfinite(dt):
+                cases[out.name] = case = {**case, "status": "no stable dt", "dt": math.nan}
+                (out / "case.json").write_text(json.dumps(case, indent=1, default=str))
+                continue
+            (out / "trial.json").write_text(json.dumps({"case": case, "dt": dt}, default=str))
+            pending.append((case, dt, out, *case_point(case, dt, quick=args.quick,
+                                                       budget=args.budget)))
+    if pending:
+        run_points([spec for *_, spec, _ in pending], root / "sweep", args.workers)
+    failed = []
+    for case, dt, out, spec, run_kw in pending:
+        try:
+            cases[out.name] = finish_case(case, dt, out, root / "sweep" / "points" /
+                                          spec["name"], run_kw)
+        except ModelError as err:
+            failed.append(str(err))
+    order = [f"{name}-{variant}" for name in scenes for variant in variants]
+    for key in (k for k in order if k in cases):
+        c = cases[key]
+        print(f"{key}: {c['status']} after {c.get('steps')} steps, "
+              f"{c.get('wall_s', 0):.1f} s; elapsed {time.perf_counter() - t0:.0f} s",
+              flush=True)
+    if failed:
+        raise SystemExit("constraints_study: " + "; ".join(failed))
+    return [cases[k] for k in order if k in cases]
 
 
 if __name__ == "__main__":

@@ -4,11 +4,11 @@ Every study writes under ``runs/`` (ignored by git) unless told otherwise; this 
 each of them with the committed folder as ``--out``, in an order where each finds what it
 reads (cost.py reads convergence.json and axisymmetric.md). The whole set takes hours on 2
 cores (the gallery most of them); ``--only`` picks studies, ``--dry-run`` prints the
-commands, each with the sweeps it runs (:data:`SWEEPS`). The studies that keep run
-folders (the gallery, the constraints and sharp-limit studies, the non-axisymmetric check,
-the sweeps' points) make them through :func:`fem_ade.jobs.ensure`, so a killed regeneration
-goes on where it stopped; ten rebuild their committed report from their committed rows
-with ``--report-only`` (``tests/test_studies.py`` checks it byte for byte).
+commands, each with the sweeps it runs (:data:`SWEEPS`) or why it is a measurement
+(:data:`MEASUREMENTS`). The sweeps' points are run folders made through
+:func:`fem_ade.jobs.ensure`, so a killed regeneration goes on where it stopped; ten rebuild
+their committed report from their committed rows with ``--report-only``
+(``tests/test_studies.py`` checks it byte for byte).
 
     python studies/regenerate.py --dry-run
     python studies/regenerate.py --only convergence cost bench
@@ -49,10 +49,9 @@ STEPS = (
 #: from its plan (the gallery: a listed point per case, a kick after each; the
 #: non-axisymmetric check: a point per 3D run, its revolved scene as its base; the sharp
 #: limit and the ADE plane: a point per seeded run, its scene as its base; the ADE lines: a
-#: branch per line of fixed v, the pear's seed as its base). The others are
-#: measurements — timings and errors of runs made in one process (convergence, cost, bench,
-#: scaling, sweep_scaling, hard_cases, readme_figure) — or runs still made by their own
-#: loop over fem_ade.jobs.ensure: constraints_study (its Δt from a trial's measurement)
+#: branch per line of fixed v, the pear's seed as its base; the constraints study: a
+#: point per case once its Δt trial has run, one after another). The others are
+#: :data:`MEASUREMENTS`
 SWEEPS = {"gallery": ("built from its plan: studies/gallery.py point_spec, kick_spec",),
           "sharp_limit": ("built per stage: studies/sharp_limit.py make_runs",),
           "eps_ladder": ("studies/sweeps/eps_ladder.toml",),
@@ -60,7 +59,21 @@ SWEEPS = {"gallery": ("built from its plan: studies/gallery.py point_spec, kick_
           "nonaxisymmetric": ("built from its cases: studies/nonaxisymmetric.py point_spec",),
           "phase_diagram": ("studies/sweeps/minimal.toml", "studies/sweeps/ade.toml"),
           "branches": ("studies/sweeps/branches.toml",),
-          "ade_branches": ("built from its lines: studies/ade_branches.py line_point",)}
+          "ade_branches": ("built from its lines: studies/ade_branches.py line_point",),
+          "constraints_study": ("built from its Δt trials: studies/constraints_study.py "
+                                "case_point",)}
+
+#: the studies that measure — timings (CPU seconds one beside another, in one process:
+#: workers on a shared machine would measure each other) or the errors of runs made at once
+#: to compare them — and so run their runs themselves, not as a sweep
+MEASUREMENTS = {"convergence": "errors and times of each resolution, in one process",
+                "axisymmetric": "CPU seconds at equal accuracy, in one process",
+                "cost": "CPU seconds at equal accuracy, in one process",
+                "bench": "step costs side by side, in one process",
+                "scaling": "MPI ranks' timings under mpirun",
+                "hard_cases": "each case's outcome and wall time, in memory in one process",
+                "readme_figure": "one run and its picture",
+                "sweep_scaling": "a sweep's wall time on 1 and 2 workers"}
 
 
 def main(argv=None) -> dict:
@@ -74,7 +87,7 @@ def main(argv=None) -> dict:
     for name, cmd in chosen:
         sweeps = SWEEPS.get(name)
         line = " ".join(["python", *cmd]) + (f"    # sweeps: {', '.join(sweeps)}" if sweeps
-                                             else "")
+                                             else f"    # a measurement: {MEASUREMENTS[name]}")
         print(line, flush=True)
         if args.dry_run or args.quick:
             done[name] = line

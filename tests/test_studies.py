@@ -240,7 +240,10 @@ def check_regenerate(result, out):
     assert all("--out studies/results" in line for line in result.values()), result
     from fem_ade.sweep import load_sweep
 
-    listed = _load(STUDIES / "regenerate.py").SWEEPS
+    regenerate = _load(STUDIES / "regenerate.py")
+    listed = regenerate.SWEEPS
+    assert set(listed) | set(regenerate.MEASUREMENTS) == studies  # each study is one or the other
+    assert not set(listed) & set(regenerate.MEASUREMENTS)
     for name, files in listed.items():  # each listed sweep file is one that loads
         assert name in result and all(f in result[name] for f in files)
         for f in files:
