@@ -546,27 +546,13 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
     docstring); the rows of branch.csv. ``folds``: end the branch at the point after its
     ``folds + 1``-th fold (0: the stable part from a stable start; None: go on past folds)."""
     from .backend import make_backend
-    from .config import RunConfig
-    from .fem.newton import solve_steady
     from .lock import FolderLock
-    from .loop import run_loop
-    from .runs import recipe
+    from .output import write_json_atomic
 
     say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
     options = {"geometry": "axisymmetric", **(backend_options or {})}
     check_branch(scene.params, param, start, stop, step, folds)
-    scene = replace(scene, params=set_parameter(scene.params, param, start))
-    steady = recipe("steady", scene)
-    config = RunConfig.build(scene, backend="fem", n=n, dt=steady["dt"],
-                             until_steady=1e-9, max_steps=20000, scheme="stabilized",
-                             constraints="exact", accelerate=True, backend_options=options)
-    config.check(scene)
-    # what the points are (not where they stop: a branch run again with another --to on the
-    # same side goes on from its points, or stops where it had)
-    identity = {"scene": scene.name, "params": scene.params.as_dict(), "param": param,
-                "from": start, "direction": "up" if stop > start else "down", "step": step,
-                "n": config.n, "options": options}
-    identity = json.loads(json.dumps(identity, default=str))
+    scene, config, identity = _branch_setup(scene, param, start, stop, step, n, options)
     out.mkdir(parents=True, exist_ok=True)
     lock = FolderLock(out).acquire()
     try:
@@ -574,90 +560,129 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
         if recorded.is_file() and json.loads(recorded.read_text()) != identity:
             raise ModelError(f"{out} holds another branch (its branch.json differs); give "
                              "another --out")
-        from .output import write_json_atomic
-
         write_json_atomic(recorded, identity)
         be = make_backend("fem", scene, n=config.n, dt=config.dt, scheme="stabilized",
                           constraints="exact", **options)
         cont = Continuation(be, param)
-        done = load_points(out)
+        done = load_points(out) or [_first_point(be, param, cont, out, config.dt, say)]
         rows = [r for r, _ in done]
-        meridians = []
-        direction = 1.0 if stop > start else -1.0
-        if not done:  # the first point: the seed's steady state
-            t0 = time.perf_counter()
-            run_loop(be, dt=config.dt, until_steady=1e-9, max_steps=20000, every=10,
-                     accelerate=True)
-            newton = solve_steady(be, max_iterations=60)
-            if not newton.converged:
-                raise ModelError(f"the branch's first point did not converge: "
-                                 f"{newton.message}")
-            row = describe_point(be, param, cont, newton.iterations,
-                                 time.perf_counter() - t0, stability(be))
-            row["s"] = 0.0
-            save_point(out, 0, be, row)
-            done = [(row, be.phi.copy())]
-            rows = [row]
-            say(_line(param, row))
         for r, _ in done:
             cont.theta = r.get("theta", cont.theta)
-        ds_min, ds_max = step / 8.0, 4.0 * step
-        ds = rows[-1].get("ds_next", step)  # a resumed branch takes the step it would have
+        meridians = []
         for r, phi in done[-10:]:
             be._set(phi, None)
             meridians.append((r[param], _curves(be)))
-        while True:
-            last_row, phi_k = rows[-1], done[-1][1]
-            p_k = last_row[param]
-            if not same_topology(rows[0]["label"], last_row["label"]):  # a resumed one's too
-                say(f"the branch ends at {param} = {p_k:.6g}: its shape became a "
-                    f"{last_row['label']} (a topology change)")
+        direction = 1.0 if stop > start else -1.0
+        ds = rows[-1].get("ds_next", step)  # a resumed branch takes the step it would have
+        while (why := _end_of_branch(rows, param, stop, direction, max_points, folds)) is None:
+            point = _next_point(be, cont, param, done, direction, ds, step)
+            if isinstance(point, str):
+                why = point
                 break
-            if (p_k - stop) * direction >= 0:
-                say(f"reached {param} = {stop}")
-                break
-            if len(rows) >= max_points:
-                break
-            turned = sum(1 for r in mark_folds(rows, param) if r["fold"])
-            if folds is not None and turned > folds:
-                say(f"the branch ends after its fold at {param} = "
-                    f"{[r['fold'] for r in rows if r['fold']][-1]} (--folds {folds})")
-                break
-            be._set(phi_k, None)
-            cont.set_p(p_k)
-            history = [(ph, r[param]) for r, ph in done[-3:]]
-            first = None
-            if len(done) < 2:  # the first step: along the tangent from the Newton system
-                first = cont.tangent(phi_k)
-                if first[1] * direction < 0:
-                    first = (-first[0], -first[1])
-            t0 = time.perf_counter()
-            corrected, ds = cont.advance(history, first, ds, ds_min)
-            if corrected is None:
-                say(f"the branch ends at {param} = {p_k:.6g}: Newton does not converge at "
-                    f"an arclength step of {ds_min:.3g}")
-                break
-            phi, p, its = corrected
-            be._set(phi, None)
-            cont.set_p(p)
-            row = describe_point(be, param, cont, its, time.perf_counter() - t0,
-                                 stability(be))
-            row["s"] = last_row.get("s", 0.0) + ds
-            row["ds_next"] = min(ds * 1.5, ds_max) if its <= GROW_BELOW else ds
-            k = len(rows)
-            save_point(out, k, be, row)
+            row, phi = point
+            save_point(out, len(rows), be, row)
             rows.append(row)
             done.append((row, phi.copy()))
-            meridians.append((p, _curves(be)))
+            meridians.append((row[param], _curves(be)))
             say(_line(param, row))
             write_table(out, param, mark_folds(rows, param))
             ds = row["ds_next"]
+        if why:
+            say(why)
         rows = mark_folds(rows, param)
         write_table(out, param, rows)
         draw(out, param, rows, meridians)
     finally:
         lock.release()
     return rows
+
+
+def _branch_setup(scene, param: str, start: float, stop: float, step: float, n, options):
+    """The scene at the branch's start, its run configuration (the ``steady`` recipe's Δt,
+    exact constraints, the axisymmetric FEM) and the branch's identity: what its points are
+    (not where they stop: a branch run again with another --to on the same side goes on
+    from its points, or stops where it had)."""
+    from .config import RunConfig
+    from .runs import recipe
+
+    scene = replace(scene, params=set_parameter(scene.params, param, start))
+    steady = recipe("steady", scene)
+    config = RunConfig.build(scene, backend="fem", n=n, dt=steady["dt"],
+                             until_steady=1e-9, max_steps=20000, scheme="stabilized",
+                             constraints="exact", accelerate=True, backend_options=options)
+    config.check(scene)
+    identity = {"scene": scene.name, "params": scene.params.as_dict(), "param": param,
+                "from": start, "direction": "up" if stop > start else "down", "step": step,
+                "n": config.n, "options": options}
+    return scene, config, json.loads(json.dumps(identity, default=str))
+
+
+def _first_point(be, param: str, cont, out: Path, dt: float, say) -> tuple[dict, np.ndarray]:
+    """The branch's first point: the seed relaxed to its steady state, then Newton's; saved
+    as point 0 (ModelError where Newton does not converge)."""
+    from .fem.newton import solve_steady
+    from .loop import run_loop
+
+    t0 = time.perf_counter()
+    run_loop(be, dt=dt, until_steady=1e-9, max_steps=20000, every=10, accelerate=True)
+    newton = solve_steady(be, max_iterations=60)
+    if not newton.converged:
+        raise ModelError(f"the branch's first point did not converge: {newton.message}")
+    row = describe_point(be, param, cont, newton.iterations, time.perf_counter() - t0,
+                         stability(be))
+    row["s"] = 0.0
+    save_point(out, 0, be, row)
+    say(_line(param, row))
+    return row, be.phi.copy()
+
+
+def _end_of_branch(rows: list[dict], param: str, stop: float, direction: float,
+                   max_points: int, folds: int | None) -> str | None:
+    """Why the branch ends at its last point ('' without a word: ``max_points``), or None
+    where it goes on."""
+    last = rows[-1]
+    p_k = last[param]
+    if not same_topology(rows[0]["label"], last["label"]):  # a resumed one's too
+        return (f"the branch ends at {param} = {p_k:.6g}: its shape became a "
+                f"{last['label']} (a topology change)")
+    if (p_k - stop) * direction >= 0:
+        return f"reached {param} = {stop}"
+    if len(rows) >= max_points:
+        return ""
+    turned = [r["fold"] for r in mark_folds(rows, param) if r["fold"]]
+    if folds is not None and len(turned) > folds:
+        return f"the branch ends after its fold at {param} = {turned[-1]} (--folds {folds})"
+    return None
+
+
+def _next_point(be, cont, param: str, done: list, direction: float, ds: float,
+                step: float) -> tuple[dict, np.ndarray] | str:
+    """The point one arclength step ``ds`` on from the last of ``done`` (along the tangent
+    for the first step, then by secant prediction and Newton's correction, the step cut down
+    to step/8 where Newton does not converge): its row and φ, or why the branch ends."""
+    last_row, phi_k = done[-1]
+    p_k = last_row[param]
+    be._set(phi_k, None)
+    cont.set_p(p_k)
+    history = [(ph, r[param]) for r, ph in done[-3:]]
+    first = None
+    if len(done) < 2:  # the first step: along the tangent from the Newton system
+        first = cont.tangent(phi_k)
+        if first[1] * direction < 0:
+            first = (-first[0], -first[1])
+    ds_min, ds_max = step / 8.0, 4.0 * step
+    t0 = time.perf_counter()
+    corrected, ds = cont.advance(history, first, ds, ds_min)
+    if corrected is None:
+        return (f"the branch ends at {param} = {p_k:.6g}: Newton does not converge at an "
+                f"arclength step of {ds_min:.3g}")
+    phi, p, its = corrected
+    be._set(phi, None)
+    cont.set_p(p)
+    row = describe_point(be, param, cont, its, time.perf_counter() - t0, stability(be))
+    row["s"] = last_row.get("s", 0.0) + ds
+    row["ds_next"] = min(ds * 1.5, ds_max) if its <= GROW_BELOW else ds
+    return row, phi
 
 
 def _curves(be):

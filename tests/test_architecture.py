@@ -201,7 +201,6 @@ def test_one_definition_of_the_run_status():
 #: shrink, and none of them grow
 LONG = 60
 LONG_FUNCTIONS = {
-    "fem_ade/branch.py:follow": (113, "debt: the continuation loop with its step control"),
     "fem_ade/loop.py:run_loop": (103, "the loop: one place where a step's outcome (accept, "
                                       "retry, diverge, stop, interrupt) is decided"),
     "fem_ade/run.py:build_parser": (96, "argparse: one option per statement"),
