@@ -54,17 +54,30 @@ SAME = 1e-3
 MAX_STEPS = 6000
 
 
-def point_of(line: Path, da0: float) -> tuple[dict, object, object]:
-    """The branch point of a line folder nearest ``da0``: (its row, its φ, its nodes); where
-    the points are not kept (a committed line: its ended.json), (its row, None, None)."""
+def line_of(lines: Path, v: float, branch: str) -> tuple[Path, dict]:
+    """The ADE line of ``branch`` at ``v`` (the pear's: its line up from where it starts):
+    its run folder in ``ade_branches.py``'s sweep and its entry in lines.json (what the line
+    is, its ``key``, and its archived ``rows``)."""
+    path = lines / "lines.json"
+    archive = json.loads(path.read_text()) if path.is_file() else {}
+    for name in (f"v={v:g}_{branch}", f"v={v:g}_{branch}-up"):  # ade_branches.line_name
+        if name in archive:
+            return lines / "sweep" / "points" / name, archive[name]
+    raise FileNotFoundError(f"{path} has no {branch} line at v = {v:g} (run "
+                            "ade_branches.py first)")
+
+
+def point_of(line: Path, entry: dict, da0: float) -> tuple[dict, object, object]:
+    """The branch point of a line nearest ``da0``: (its row, its φ, its nodes) from its run
+    folder; where the points are not kept (a committed line: its archived rows), (its row,
+    None, None)."""
     import numpy as np
 
     folders = sorted((line / "points").glob("[0-9][0-9][0-9][0-9]"))
     rows = [(json.loads((f / "summary.json").read_text()), f) for f in folders
             if (f / "summary.json").is_file()]
-    if not rows and (line / "ended.json").is_file():
-        kept = json.loads((line / "ended.json").read_text())["rows"]
-        return min(kept, key=lambda r: abs(r["da0"] - da0)), None, None
+    if not rows and entry["rows"]:
+        return min(entry["rows"], key=lambda r: abs(r["da0"] - da0)), None, None
     if not rows:
         raise FileNotFoundError(f"{line} holds no branch points (run ade_branches.py first)")
     row, folder = min(rows, key=lambda p: abs(p[0]["da0"] - da0))
@@ -72,7 +85,7 @@ def point_of(line: Path, da0: float) -> tuple[dict, object, object]:
         return row, np.array(z["phi"]), np.array(z["points"])
 
 
-def revolved(line: Path, row: dict, phi, nodes, eps: float | None = None):
+def revolved(line: Path, entry: dict, row: dict, phi, nodes, eps: float | None = None):
     """The 3D ``vesicle`` scene of a branch point, seeded with its φ = 0 meridian (at the
     line's ε, or at ``eps``: the same membrane with another interface width)."""
     import numpy as np
@@ -85,7 +98,7 @@ def revolved(line: Path, row: dict, phi, nodes, eps: float | None = None):
     from fem_ade.scenes import vesicle_scene
 
     info = json.loads((line / "branch.json").read_text())
-    ended = json.loads((line / "ended.json").read_text())
+    ended = entry["key"]
     for da0 in (info["from"], row["da0"]):  # the line's mesh: graded around its first seed
         try:
             scene = vesicle_scene(v=ended["v"], da0=da0, kbar=1.4, eps=ended["eps"],
@@ -195,16 +208,14 @@ def main(argv=None) -> dict:
     chosen = set(range(len(cases))) if args.case is None else set(args.case)
     found, specs = [], []
     for i, (v, da0, branch) in enumerate(cases):
-        line = lines / f"v={v:g}" / branch
-        if not line.is_dir():  # the pear's lines: up and down from where it starts
-            line = line.with_name(f"{branch}-up")
-        row, phi, nodes = point_of(line, da0)
+        line, entry = line_of(lines, v, branch)
+        row, phi, nodes = point_of(line, entry, da0)
         name = f"v={v:g}_da0={row['da0']:.4f}_{branch}"
         done = all((folder_of(base, name, k) / "summary.json").is_file() for k in KINDS)
         if i not in chosen and not done or args.report_only and not done:
             continue
         if not done:
-            scene, n = revolved(line, row, phi, nodes, args.eps)
+            scene, n = revolved(line, entry, row, phi, nodes, args.eps)
             specs += [point_spec(name, k, scene, n) for k in KINDS]
         found.append((v, branch, row, name))
     if specs:
