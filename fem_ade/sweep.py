@@ -315,6 +315,20 @@ def load_sweep(path: str | Path) -> Sweep:
     return sweep
 
 
+def listed_sweep(name: str, specs: list[dict], *, base: str = "vesicle") -> Sweep:
+    """A sweep of points listed in code — each a ``[[points]]`` table as a sweep file gives
+    it (name, base, seed, scene, run; optionally after, when, and a branch point's whole
+    ``branch``) — checked as a sweep file's is (:func:`check_sweep`; ModelError, one line).
+    Its seeds are its points'; with branch points, [branch] is the first one's."""
+    full = [{"seed": 0, "scene": {}, "run": {}, "after": None, "when": None, **spec}
+            for spec in specs]
+    branch = next((spec["branch"] for spec in full if spec.get("branch")), None)
+    sweep = Sweep(name, base, {}, {}, list(dict.fromkeys(spec["seed"] for spec in full)), {},
+                  branch, listed=full)
+    check_sweep(sweep)
+    return sweep
+
+
 def _scene_keys(base: str, keys, where: str) -> None:
     """A vesicle sweep's scene keys must be the family's parameters (ModelError)."""
     if base != "vesicle":

@@ -160,8 +160,8 @@ def line_point(key: dict) -> dict:
     ModelError where the pear has none."""
     branch = {"param": "da0", "from": key["from"], "to": key["to"], "step": key["step"],
               "folds": 0}
-    spec = {"name": line_name(key["v"], key["line"]), "seed": key["branch"], "run": {},
-            "after": None, "when": None, "branch": branch, "base": "vesicle",
+    spec = {"name": line_name(key["v"], key["line"]), "seed": key["branch"],
+            "branch": branch, "base": "vesicle",
             "scene": {"v": key["v"], "kbar": KBAR, "eps": key["eps"], "R0": key["R0"]}}
     if key["branch"] == "pear":
         from fem_ade.scenes import scene_to_mapping
@@ -190,7 +190,7 @@ def run_lines(base: Path, keys: list[dict], archive: dict, workers: int) -> None
     ``base/lines.json`` as soon as the sweep has ended (:func:`archive_line`)."""
     from fem_ade.model import ModelError
     from fem_ade.output import write_json_atomic
-    from fem_ade.sweep import Sweep, check_sweep, run_sweep
+    from fem_ade.sweep import listed_sweep, run_sweep
 
     specs, todo = [], []
     for key in keys:
@@ -203,11 +203,7 @@ def run_lines(base: Path, keys: list[dict], archive: dict, workers: int) -> None
         except ModelError as err:  # no pear to start from, even by continuation
             archive[name] = {"key": key, "rows": [], "missing": str(err), "seconds": None}
     if specs:
-        seeds = list(dict.fromkeys(spec["seed"] for spec in specs))
-        sweep = Sweep(base.name, "vesicle", {}, {}, seeds, {}, specs[0]["branch"],
-                      listed=specs)
-        check_sweep(sweep)
-        run_sweep(sweep, base / "sweep", workers=workers, quiet=True)
+        run_sweep(listed_sweep(base.name, specs), base / "sweep", workers=workers, quiet=True)
     for key in todo:
         name = line_name(key["v"], key["line"])
         archive[name] = archive_line(base / "sweep" / "points" / name, key)

@@ -348,7 +348,7 @@ def case_point(case: dict, dt: float, *, quick: bool, budget: float) -> tuple[di
     kw.pop("quiet")
     run = dict(dt=dt, every=10 if quick else every, **run_kw, **kw, render=True)
     spec = {"name": f"{name}-{variant}", "base": scene_to_mapping(scene_for(name, variant)),
-            "seed": seed, "scene": {}, "run": run, "after": None, "when": None}
+            "seed": seed, "run": run}
     return spec, run_kw
 
 
@@ -356,12 +356,9 @@ def run_points(specs: list[dict], root: Path, workers: int) -> None:
     """The pass's production runs as one sweep of listed points in ``root``
     (:mod:`fem_ade.sweep`: ``root/points/NAME``, on ``workers`` Dask processes, resumable,
     a failure recorded with its reason)."""
-    from fem_ade.sweep import Sweep, check_sweep, run_sweep
+    from fem_ade.sweep import listed_sweep, run_sweep
 
-    seeds = sorted({spec["seed"] for spec in specs})
-    sweep = Sweep(root.parent.name, "vesicle", {}, {}, seeds, {}, listed=specs)
-    check_sweep(sweep)
-    run_sweep(sweep, root, workers=workers, quiet=True)
+    run_sweep(listed_sweep(root.parent.name, specs), root, workers=workers, quiet=True)
 
 
 def finish_case(case: dict, dt: float, out: Path, run: Path, run_kw: dict) -> dict:

@@ -183,7 +183,7 @@ def point_spec(case: dict) -> dict:
     run = dict(case["kwargs"], render=True)
     return {"name": point_name(case["variant"], case["backend"], case["scene"]),
             "base": case["scene"], "seed": run.pop("seed", 0), "scene": scene_changes(case),
-            "run": run, "after": None}
+            "run": run}
 
 
 def kick_spec(spec: dict) -> dict:
@@ -196,12 +196,9 @@ def kick_spec(spec: dict) -> dict:
 
 def as_sweep(specs: list[dict]):
     """The listed points as one sweep, checked (:func:`fem_ade.sweep.check_sweep`)."""
-    from fem_ade.sweep import Sweep, check_sweep
+    from fem_ade.sweep import listed_sweep
 
-    sweep = Sweep("gallery", specs[0]["base"], {}, {}, [0, PERTURB[1], KICK[1]], {},
-                  listed=specs)
-    check_sweep(sweep)
-    return sweep
+    return listed_sweep("gallery", specs, base=specs[0]["base"])
 
 
 def far_field(phi: np.ndarray, L: float, eps: float, far: float = 6.0) -> float:

@@ -145,7 +145,6 @@ def point_spec(name: str, kind: str, scene, n: int) -> dict:
     from fem_ade.scenes import scene_to_mapping
 
     return {"name": f"{name}_{kind}", "base": scene_to_mapping(scene), "seed": 1,
-            "scene": {}, "after": None, "when": None,
             "run": {"recipe": "steady", "max_steps": MAX_STEPS, "checkpoint_every": 200,
                     "backend": "spectral", "n": n, "perturb": KINDS[kind], "render": False,
                     "sharp": False}}  # compared with the axisymmetric run, not sharp_ref
@@ -154,11 +153,9 @@ def point_spec(name: str, kind: str, scene, n: int) -> dict:
 def run_all(specs: list[dict], base: Path) -> None:
     """The cases' runs as one sweep on two Dask workers (a control beside its kicked run):
     resumable, each run once, a failure recorded with its reason."""
-    from fem_ade.sweep import Sweep, check_sweep, run_sweep
+    from fem_ade.sweep import listed_sweep, run_sweep
 
-    sweep = Sweep("nonaxisymmetric", "vesicle", {}, {}, [1], {}, listed=specs)
-    check_sweep(sweep)
-    run_sweep(sweep, base / "sweep", workers=2, quiet=True)
+    run_sweep(listed_sweep("nonaxisymmetric", specs), base / "sweep", workers=2, quiet=True)
 
 
 def result_3d(folder: Path) -> dict:

@@ -359,19 +359,17 @@ def make_runs(root: Path, jobs: list[SimpleNamespace], workers: int = 2) -> list
     ended with a result, in the jobs' order."""
     from fem_ade.jobs import read_failure, read_summary
     from fem_ade.scenes import scene_to_mapping
-    from fem_ade.sweep import Sweep, check_sweep, run_sweep
+    from fem_ade.sweep import listed_sweep, run_sweep
 
     if not jobs:
         return []
     made, specs = {}, []
     for job in jobs:
         made[job.key] = seeded(job.sharp, job.branch, job.eps, job.backend, **job.ade)
-        specs.append({"name": point_name(job.key), "seed": 1, "scene": {}, "after": None,
-                      "when": None, "base": scene_to_mapping(made[job.key].scene),
+        specs.append({"name": point_name(job.key), "seed": 1,
+                      "base": scene_to_mapping(made[job.key].scene),
                       "run": {"recipe": "steady", **made[job.key].run}})
-    sweep = Sweep(root.name, "vesicle", {}, {}, [1], {}, listed=specs)
-    check_sweep(sweep)
-    run_sweep(sweep, root / "sweep", workers=workers, quiet=True)
+    run_sweep(listed_sweep(root.name, specs), root / "sweep", workers=workers, quiet=True)
     rows = []
     for job in jobs:
         folder = root / "sweep" / "points" / point_name(job.key)

@@ -362,6 +362,30 @@ BAD_LISTED_BRANCHES = [
 ]
 
 
+def test_a_sweep_listed_in_code_is_the_sweep_file_s(tmp_path):
+    """fem_ade.sweep.listed_sweep (the studies' sweeps built from their plans) makes the
+    points a sweep file listing the same tables makes: the same names and identities, runs
+    and branches alike; and it checks them as load_sweep does."""
+    from fem_ade.sweep import listed_sweep
+
+    path = tmp_path / "l.toml"
+    path.write_text('name = "b"\nseeds = ["prolate"]\n[branch]\nparam = "v"\nfrom = 0.95\n'
+                    'to = 0.92\n[[points]]\nname = "small"\nscene = {R0 = 0.18, eps = 0.05}\n'
+                    'branch = {to = 0.93, step = 0.01}\n')
+    from_file = load_sweep(path).points()
+    made = listed_sweep("b", [{"name": "small", "seed": "prolate",
+                               "scene": {"R0": 0.18, "eps": 0.05},
+                               "branch": {**from_file[0].branch}}])
+    assert [p.identity() for p in made.points()] == [p.identity() for p in from_file]
+    runs = listed_sweep("r", [{"name": "a", "scene": {"v": 0.9, "eps": 0.08},
+                               "seed": "prolate", "run": {"recipe": "steady"}},
+                              {"name": "b", "after": "a", "seed": "prolate",
+                               "scene": {"v": 0.9, "eps": 0.04}}])
+    assert [(p.name, p.after) for p in runs.points()] == [("a", None), ("b", "a")]
+    with pytest.raises(ModelError, match="recipe"):
+        listed_sweep("r", [{"name": "a", "seed": "prolate", "run": {"recipe": "nope"}}])
+
+
 def test_a_vesicle_branch_in_da0_is_checked_at_its_start(tmp_path):
     """A vesicle sweep of branches in Δa₀: each point's vesicle is checked with Δa₀ at the
     branch's start (it was checked without it, and refused as κ̄ without Δa₀)."""
