@@ -385,13 +385,18 @@ def translation(be) -> np.ndarray:
 # the branch folder
 # ---------------------------------------------------------------------------------------------
 def describe_point(be, name: str, cont: Continuation, newton: int, seconds: float,
-                   eigenvalues: np.ndarray) -> dict:
+                   eigenvalues: np.ndarray | None) -> dict:
+    """A point's row; ``eigenvalues`` None: its stability not computed (``unstable`` and
+    ``lowest_eigenvalue`` None)."""
     from .sharp import reduced_energy
 
     final = be.diagnostics()
     shape, _ = be.describe_final(final)
     sharp = (shape or {}).get("sharp") or {}
-    unstable = int(np.sum(eigenvalues < UNSTABLE))
+    if eigenvalues is None:
+        eigenvalues, unstable = np.zeros(0), None
+    else:
+        unstable = int(np.sum(eigenvalues < UNSTABLE))
     return {name: cont.p, "e": reduced_energy(final, be.params.kappa),
             **{k: final[k] for k in ("E", "W", "G", "V", "A", "dA")},
             "v_surface": sharp.get("reduced_volume"),
@@ -472,12 +477,14 @@ def draw(out: Path, name: str, rows: list[dict], meridians: list) -> list[Path]:
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     x = np.array([r[name] for r in rows])
     e = np.array([r["e"] for r in rows])
-    stable = np.array([r["unstable"] == 0 for r in rows])
+    stable = np.array([r["unstable"] in (0, None, "") for r in rows])  # None: not computed
     for i in range(len(rows) - 1):
         both = stable[i] and stable[i + 1]
         ax.plot(x[i:i + 2], e[i:i + 2], "-" if both else "--", color="tab:blue" if both
                 else "tab:red", lw=1.8)
-    ax.plot(x[stable], e[stable], "o", ms=3, color="tab:blue", label="stable")
+    known = any(r["unstable"] not in (None, "") for r in rows)
+    ax.plot(x[stable], e[stable], "o", ms=3, color="tab:blue",
+            label="stable" if known else "stability not computed")
     ax.plot(x[~stable], e[~stable], "o", ms=3, color="tab:red", label="unstable")
     for r in rows:
         if r.get("fold"):
@@ -541,10 +548,13 @@ def crossing(a: list[dict], b: list[dict], name: str) -> float | None:
 @limit_threads
 def follow(scene, *, param: str, start: float, stop: float, step: float, out: Path,
            backend_options: dict | None = None, n: int | None = None, quiet: bool = False,
-           max_points: int = 400, folds: int | None = None) -> list[dict]:
+           max_points: int = 400, folds: int | None = None,
+           stable: bool = True) -> list[dict]:
     """Follow the branch of ``scene``'s seed in ``param`` from ``start`` to ``stop`` (module
     docstring); the rows of branch.csv. ``folds``: end the branch at the point after its
-    ``folds + 1``-th fold (0: the stable part from a stable start; None: go on past folds)."""
+    ``folds + 1``-th fold (0: the stable part from a stable start; None: go on past folds).
+    ``stable=False``: no stability at the points (their ``unstable`` blank) — at ε = 0.005
+    it is most of a point's time (119 s of ~150 s on the prolate, 65105 unknowns)."""
     from .backend import make_backend
     from .lock import FolderLock
     from .output import write_json_atomic
@@ -553,6 +563,9 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
     options = {"geometry": "axisymmetric", **(backend_options or {})}
     check_branch(scene.params, param, start, stop, step, folds)
     scene, config, identity = _branch_setup(scene, param, start, stop, step, n, options)
+    if not stable:  # (absent when on: the folders of before stay theirs)
+        identity["stability"] = False
+    check = stability if stable else (lambda be: None)
     out.mkdir(parents=True, exist_ok=True)
     lock = FolderLock(out).acquire()
     try:
@@ -564,7 +577,7 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
         be = make_backend("fem", scene, n=config.n, dt=config.dt, scheme="stabilized",
                           constraints="exact", **options)
         cont = Continuation(be, param)
-        done = load_points(out) or [_first_point(be, param, cont, out, config.dt, say)]
+        done = load_points(out) or [_first_point(be, param, cont, out, config.dt, say, check)]
         rows = [r for r, _ in done]
         for r, _ in done:
             cont.theta = r.get("theta", cont.theta)
@@ -575,7 +588,7 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
         direction = 1.0 if stop > start else -1.0
         ds = rows[-1].get("ds_next", step)  # a resumed branch takes the step it would have
         while (why := _end_of_branch(rows, param, stop, direction, max_points, folds)) is None:
-            point = _next_point(be, cont, param, done, direction, ds, step)
+            point = _next_point(be, cont, param, done, direction, ds, step, check)
             if isinstance(point, str):
                 why = point
                 break
@@ -617,9 +630,10 @@ def _branch_setup(scene, param: str, start: float, stop: float, step: float, n, 
     return scene, config, json.loads(json.dumps(identity, default=str))
 
 
-def _first_point(be, param: str, cont, out: Path, dt: float, say) -> tuple[dict, np.ndarray]:
+def _first_point(be, param: str, cont, out: Path, dt: float, say, check
+                 ) -> tuple[dict, np.ndarray]:
     """The branch's first point: the seed relaxed to its steady state, then Newton's; saved
-    as point 0 (ModelError where Newton does not converge)."""
+    as point 0 (ModelError where Newton does not converge); ``check``: its stability."""
     from .fem.newton import solve_steady
     from .loop import run_loop
 
@@ -629,7 +643,7 @@ def _first_point(be, param: str, cont, out: Path, dt: float, say) -> tuple[dict,
     if not newton.converged:
         raise ModelError(f"the branch's first point did not converge: {newton.message}")
     row = describe_point(be, param, cont, newton.iterations, time.perf_counter() - t0,
-                         stability(be))
+                         check(be))
     row["s"] = 0.0
     save_point(out, 0, be, row)
     say(_line(param, row))
@@ -656,7 +670,7 @@ def _end_of_branch(rows: list[dict], param: str, stop: float, direction: float,
 
 
 def _next_point(be, cont, param: str, done: list, direction: float, ds: float,
-                step: float) -> tuple[dict, np.ndarray] | str:
+                step: float, check) -> tuple[dict, np.ndarray] | str:
     """The point one arclength step ``ds`` on from the last of ``done`` (along the tangent
     for the first step, then by secant prediction and Newton's correction, the step cut down
     to step/8 where Newton does not converge): its row and φ, or why the branch ends."""
@@ -679,7 +693,7 @@ def _next_point(be, cont, param: str, done: list, direction: float, ds: float,
     phi, p, its = corrected
     be._set(phi, None)
     cont.set_p(p)
-    row = describe_point(be, param, cont, its, time.perf_counter() - t0, stability(be))
+    row = describe_point(be, param, cont, its, time.perf_counter() - t0, check(be))
     row["s"] = last_row.get("s", 0.0) + ds
     row["ds_next"] = min(ds * 1.5, ds_max) if its <= GROW_BELOW else ds
     return row, phi
@@ -744,9 +758,10 @@ def same_branch(first, label) -> bool:
 
 
 def _line(param, row) -> str:
-    return (f"  {param} = {row[param]:.6g}: e = {row['e']:.8g}, {row['label']}, unstable "
-            f"{row['unstable']} (lowest eigenvalue {row['lowest_eigenvalue']:.3g}), Newton "
-            f"{row['newton']}, {row['seconds']} s")
+    stable = ("stability not computed" if row["unstable"] is None else
+              f"unstable {row['unstable']} (lowest eigenvalue {row['lowest_eigenvalue']:.3g})")
+    return (f"  {param} = {row[param]:.6g}: e = {row['e']:.8g}, {row['label']}, {stable}, "
+            f"Newton {row['newton']}, {row['seconds']} s")
 
 
 def main(argv=None) -> int:
@@ -767,6 +782,9 @@ def main(argv=None) -> int:
     ap.add_argument("--order", type=int, help="element order (default 8)")
     ap.add_argument("--folds", type=int, help="end the branch past this many folds (0: at "
                     "the first; default: go on past folds)")
+    ap.add_argument("--no-stability", dest="stable", action="store_false",
+                    help="no stability at the points (their unstable count blank): at small "
+                    "eps most of a point's time")
     ap.add_argument("--quiet", action="store_true")
     ves = ap.add_argument_group("the vesicle family")
     for name in ("v", "da0", "kbar", "C", "eps", "R0"):
@@ -793,7 +811,7 @@ def main(argv=None) -> int:
         options = {} if args.order is None else {"order": args.order}
         follow(scene, param=args.param, start=args.start, stop=args.stop, step=args.step,
                out=Path(args.out), backend_options=options, n=args.n, quiet=args.quiet,
-               folds=args.folds)
+               folds=args.folds, stable=args.stable)
     except ModelError as err:
         print(f"fem_ade.branch: error: {err}", file=sys.stderr)
         return 2

@@ -31,6 +31,7 @@ fixed nor swept, ``[run]`` may set only ``n`` and ``backend_options`` (e.g. the 
     to = 0.8
     step = 0.01                           # the arclength step (default 0.01)
     folds = 0                             # optional: end past this many folds
+    stability = false                     # optional: no stability at the points (faster)
 
 Its row is the branch's last point (``steps``: its number of points; ``end``: the
 parameter there; ``folds``: where it turned); one branch per Dask task. Its points may also
@@ -425,7 +426,8 @@ def _listed(points, base: str, seeds: list, axes: dict, branch: dict | None = No
 
 
 #: a [branch] table's keys (their types) and the [run] options a branch sweep takes
-BRANCH_KEYS = {"param": str, "from": float, "to": float, "step": float, "folds": int}
+BRANCH_KEYS = {"param": str, "from": float, "to": float, "step": float, "folds": int,
+               "stability": bool}
 BRANCH_RUN_KEYS = ("n", "backend_options")
 
 
@@ -462,6 +464,10 @@ def _branch_types(table: dict, where: str) -> dict:
     for key, value in table.items():
         kind = BRANCH_KEYS[key]
         if key == "folds" and value is None:
+            continue
+        if kind is bool:
+            if not isinstance(value, bool):
+                raise ModelError(f"{where}.{key} must be true or false, got {value!r}")
             continue
         if kind is float and isinstance(value, int) and not isinstance(value, bool):
             out[key] = value = float(value)
@@ -656,7 +662,7 @@ def _follow(point: Point, folder: Path) -> None:
     rows = follow(point.scene(), param=b["param"], start=b["from"], stop=b["to"],
                   step=b["step"], out=folder, n=point.run.get("n"),
                   backend_options=point.run.get("backend_options"), quiet=True,
-                  folds=b["folds"])
+                  folds=b["folds"], stable=b.get("stability", True))
     last = rows[-1]
     write_json_atomic(folder / "summary.json", {
         "status": Status.COMPLETED, "branch": b, "points": len(rows), "end": last[b["param"]],

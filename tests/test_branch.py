@@ -58,6 +58,21 @@ def test_each_point_is_a_steady_state(branch):
     assert get_parameter(params, "v") == pytest.approx(point["v"], rel=1e-12)
 
 
+def test_a_branch_without_stability(branch, tmp_path):
+    """--no-stability: the same points (v, e, E, label, Newton's iterations), the unstable
+    count and lowest eigenvalue blank; it is another branch (its folder holds one with)."""
+    out = tmp_path / "unchecked"
+    assert main([*ARGS, "--no-stability", "--out", str(out)]) == 0
+    keep = ("v", "e", "E", "W", "V", "A", "label", "newton")
+    assert [{k: r[k] for k in keep} for r in rows(out)] == \
+        [{k: r[k] for k in keep} for r in rows(branch)]
+    assert all(r["unstable"] == "" and r["lowest_eigenvalue"] == "" for r in rows(out))
+    assert json.loads((out / "branch.json").read_text())["stability"] is False
+    assert "stability" not in json.loads((branch / "branch.json").read_text())
+    assert main([*ARGS, "--out", str(branch)]) == 0  # the one with: as it was
+    assert main([*ARGS, "--no-stability", "--out", str(branch)]) == 2
+
+
 def test_a_stopped_branch_goes_on(branch, tmp_path):
     """The folder of a branch stopped after its second point, run again with the same
     command, ends with the table of the branch never stopped."""

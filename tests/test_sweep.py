@@ -313,6 +313,7 @@ BAD_BRANCH_SWEEPS = [
     ("a step too long", lambda t: t.replace("step = 0.02", "step = 0.5"), "--step"),
     ("a word as the end", lambda t: t.replace("to = 0.92", 'to = "low"'), "branch.to"),
     ("an unknown parameter", lambda t: t.replace('param = "v"', 'param = "R0"'), "--param"),
+    ("stability not true or false", lambda t: t + 'stability = "no"\n', "true or false"),
 ]
 
 
@@ -395,6 +396,10 @@ def test_a_vesicle_branch_in_da0_is_checked_at_its_start(tmp_path):
                     .replace("to = 0.92", "to = 1.1"))
     sweep = load_sweep(path)
     assert [p.branch["from"] for p in sweep.points()] == [1.04, 1.04]
+    assert "stability" not in sweep.points()[0].identity()["branch"]  # (old folders stay)
+    path.write_text(path.read_text() + "stability = false\n")
+    assert load_sweep(path).points()[0].branch["stability"] is False
+    path.write_text(path.read_text().replace("stability = false\n", ""))
     path.write_text(path.read_text().replace("kbar = 1.4", "kbar = -1.0"))
     with pytest.raises(ModelError, match="kbar"):
         load_sweep(path)
