@@ -35,7 +35,7 @@ checkpoint.npz afterwards, so the committed results stay small). ``OUT/constrain
 gets the tables; the hand-written observations in ``OUT/constraints/notes.md`` (if present)
 are included in it verbatim.
 
-    python studies/constraints_study.py                 # until_steady 1e-6 (~4 min, 2 cores)
+    python studies/constraints_study.py                 # until_steady 1e-6 (136 s, 2 cores)
     python studies/constraints_study.py --long --tol 1e-8 --budget 170   # stricter (~15 min)
     python studies/constraints_study.py --check --budget 170   # continuation check (~5 min)
     python studies/constraints_study.py --quick --out /tmp/q   # n = 16, 20 steps, < 30 s
