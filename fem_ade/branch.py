@@ -432,7 +432,7 @@ def load_points(out: Path) -> list[tuple[dict, np.ndarray]]:
 
 
 def write_table(out: Path, name: str, rows: list[dict]) -> None:
-    from .output import write_json_atomic  # noqa: F401 (the folder's other writer)
+    from .output import csv_cell
 
     cols = (name, *COLUMNS[1:])
     tmp = out / "branch.csv.tmp"
@@ -440,14 +440,17 @@ def write_table(out: Path, name: str, rows: list[dict]) -> None:
         w = csv.writer(fh)
         w.writerow(("point", *cols))
         for k, r in enumerate(rows):
-            w.writerow([k] + [_cell(r.get(c)) for c in cols])
+            w.writerow([k] + [csv_cell(r.get(c)) for c in cols])
     tmp.replace(out / "branch.csv")
 
 
-def _cell(value):
-    if isinstance(value, float):
-        return f"{value:.10g}"
-    return "" if value is None else value
+def read_table(out: Path) -> list[dict]:
+    """A branch folder's branch.csv (:func:`write_table`) as rows, numbers as the ints and
+    floats they were written from ('' where a cell is empty: no fold, no stability)."""
+    from .output import parse_cell
+
+    with open(out / "branch.csv", newline="") as fh:
+        return [{k: parse_cell(v) for k, v in r.items()} for r in csv.DictReader(fh)]
 
 
 def mark_folds(rows: list[dict], name: str) -> list[dict]:

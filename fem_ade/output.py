@@ -251,6 +251,24 @@ def write_fields(path: str | Path, fields: dict, **meta) -> None:
     os.replace(tmp, path)
 
 
+def csv_cell(value):
+    """A value as a table's cell (branch.csv, sweep.csv): a float to 10 significant digits,
+    None empty, anything else as it is."""
+    if isinstance(value, float):
+        return f"{value:.10g}"
+    return "" if value is None else value
+
+
+def parse_cell(text: str):
+    """A CSV cell back as the int or float it was written from; text stays text ('' too)."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
 def read_history(path: str | Path) -> dict[str, np.ndarray]:
     """history.csv as a dict of column arrays."""
     with open(path, newline="") as f:

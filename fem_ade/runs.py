@@ -34,6 +34,7 @@ from .output import (
     check_out_dir,
     history_digest,
     package_versions,
+    parse_cell,
     prepare_out_dir,
     read_json,
     truncate_csv,
@@ -498,16 +499,6 @@ class _Series:
         self.xdmf.close()
 
 
-def _cell(text: str):
-    """A CSV cell back as the int or float it was written from; text stays text."""
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
 class _Shapes:
     """The shape descriptors along a run (``shape_every``): rows of OUT/shapes.csv."""
 
@@ -524,7 +515,7 @@ class _Shapes:
             append = (resume_from is not None and path.is_file()
                       and path.read_text().startswith(",".join(self.COLUMNS)))
             if append:
-                self.rows = [{c: _cell(v) for c, v in r.items()}
+                self.rows = [{c: parse_cell(v) for c, v in r.items()}
                              for r in truncate_csv(path, resume_from - 1)]
             self.file = open(path, "a" if append else "w")  # noqa: SIM115
             if not append:

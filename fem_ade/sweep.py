@@ -94,7 +94,7 @@ from pathlib import Path
 
 from .jobs import failure_record, read_failure, record_failure
 from .model import ModelError
-from .output import write_json_atomic
+from .output import csv_cell, write_json_atomic
 from .status import ENDED, Status
 
 if sys.version_info >= (3, 11):
@@ -872,7 +872,7 @@ def write_table(rows: list[dict], path: Path, axes: list[str]) -> None:
         w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
         w.writeheader()
         for r in rows:
-            w.writerow({k: _cell(r.get(k)) for k in cols})
+            w.writerow({k: csv_cell(r.get(k)) for k in cols})
     os.replace(tmp, path)
 
 
@@ -894,12 +894,6 @@ def read_table(path: Path) -> list[dict]:
                                           "reason", "folds", "after") else v
                  for k, v in r.items()}
                 for r in csv.DictReader(fh)]
-
-
-def _cell(value):
-    if isinstance(value, float):
-        return f"{value:.10g}"
-    return "" if value is None else value
 
 
 def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | None = None,

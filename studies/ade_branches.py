@@ -214,8 +214,7 @@ def archive_line(folder: Path, key: dict) -> dict:
     """A followed line's archive entry: its rows (branch.csv, the columns the report reads),
     or why it has none (its failure record's reason), and its seconds (the task's wall
     time: the seed and every Newton point)."""
-    import csv
-
+    from fem_ade.branch import read_table
     from fem_ade.jobs import failure_record, read_failure, read_summary
 
     failed, summary = read_failure(folder), read_summary(folder)
@@ -224,19 +223,8 @@ def archive_line(folder: Path, key: dict) -> dict:
         record = json.loads(failure_record(folder).read_text()) if failed else {}
         return {"key": key, "rows": [], "seconds": record.get("seconds"),
                 "missing": reason.removeprefix("ModelError: ")}
-    with open(folder / "branch.csv") as fh:
-        rows = [_plain({k: _value(x) for k, x in r.items()}) for r in csv.DictReader(fh)]
+    rows = [_plain(r) for r in read_table(folder)]
     return {"key": key, "rows": rows, "missing": None, "seconds": summary.get("seconds")}
-
-
-def _value(text: str):
-    """A branch.csv cell as it was written: an int, a float or text ('' for no fold)."""
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
 
 
 def continued_pear(v: float, m0: float, eps: float, R0: float):

@@ -40,7 +40,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
 
 import argparse  # noqa: E402
-import csv  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 OUT = Path("runs") / "studies"
@@ -70,6 +69,7 @@ def pairs_of(sweep) -> list[dict]:
 
 def line(root: Path, point) -> list[dict]:
     """A branch point's rows (its branch.csv) once it has ended, else none."""
+    from fem_ade.branch import read_table
     from fem_ade.jobs import read_summary
     from fem_ade.status import Status
 
@@ -77,15 +77,7 @@ def line(root: Path, point) -> list[dict]:
     summary = read_summary(folder)
     if summary is None or summary.get("status") != Status.COMPLETED:
         return []
-    with open(folder / "branch.csv") as fh:
-        return [{k: _num(v) for k, v in r.items()} for r in csv.DictReader(fh)]
-
-
-def _num(text: str):
-    try:
-        return float(text)
-    except ValueError:
-        return text
+    return read_table(folder)
 
 
 def main(argv=None) -> dict:

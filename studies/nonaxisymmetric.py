@@ -58,9 +58,14 @@ def line_of(lines: Path, v: float, branch: str) -> tuple[Path, dict]:
     """The ADE line of ``branch`` at ``v`` (the pear's: its line up from where it starts):
     its run folder in ``ade_branches.py``'s sweep and its entry in lines.json (what the line
     is, its ``key``, and its archived ``rows``)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from ade_branches import line_name
+
     path = lines / "lines.json"
     archive = json.loads(path.read_text()) if path.is_file() else {}
-    for name in (f"v={v:g}_{branch}", f"v={v:g}_{branch}-up"):  # ade_branches.line_name
+    for name in (line_name(v, branch), line_name(v, f"{branch}-up")):
         if name in archive:
             return lines / "sweep" / "points" / name, archive[name]
     raise FileNotFoundError(f"{path} has no {branch} line at v = {v:g} (run "
