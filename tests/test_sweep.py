@@ -424,23 +424,18 @@ def test_listed_branches(tmp_path):
     assert float(rows["R0=0.2_seed=prolate"]["end"]) <= 0.92
 
 
-@pytest.mark.parametrize("case", BAD_LISTED_BRANCHES, ids=[c[0] for c in BAD_LISTED_BRANCHES])
-def test_bad_listed_branches_are_one_line(tmp_path, capsys, case):
-    _, change, word = case
-    path = tmp_path / "b.toml"
-    path.write_text(change(LISTED_BRANCHES))
-    out = tmp_path / "out"
-    code = main([str(path), "--out", str(out), "--quiet"])
-    err = capsys.readouterr().err
-    assert code == 2 and len(err.strip().splitlines()) == 1 and word in err, err
-    assert not out.exists(), "a refused sweep wrote something"
+#: each mistake with the branch sweep it is made in (a grid, or listed branches)
+BAD_BRANCH_CASES = [(BRANCH_SWEEP, c) for c in BAD_BRANCH_SWEEPS] + \
+    [(LISTED_BRANCHES, c) for c in BAD_LISTED_BRANCHES]
 
 
-@pytest.mark.parametrize("case", BAD_BRANCH_SWEEPS, ids=[c[0] for c in BAD_BRANCH_SWEEPS])
-def test_bad_branch_sweeps_are_one_line(tmp_path, capsys, case):
+@pytest.mark.parametrize("sweep, case", BAD_BRANCH_CASES,
+                         ids=[("listed: " if t is LISTED_BRANCHES else "") + c[0]
+                              for t, c in BAD_BRANCH_CASES])
+def test_bad_branch_sweeps_are_one_line(tmp_path, capsys, sweep, case):
     _, change, word = case
     path = tmp_path / "b.toml"
-    path.write_text(change(BRANCH_SWEEP))
+    path.write_text(change(sweep))
     out = tmp_path / "out"
     code = main([str(path), "--out", str(out), "--quiet"])
     err = capsys.readouterr().err
