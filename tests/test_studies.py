@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from report_compare import differences
 
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 SCRIPTS = sorted(STUDIES.glob("*.py"))
@@ -480,8 +481,12 @@ REPORTS = {"constraints_study": [], "sharp_limit": [], "gallery": [], "ade_plane
                                   if n in SLOW - {"ade_plane"} else n for n in REPORTS])
 def test_committed_report_is_rebuilt_from_its_rows(name, tmp_path, monkeypatch):
     """``--report-only`` on a copy of the committed results (git's files only) leaves every
-    committed file byte for byte as it is: a report says what its rows say, and no committed
-    table or picture is out of date (sharp_limit.md once lacked a paragraph of its notes)."""
+    committed file as it is, to the digits it means (tests/report_compare.py: JSON floats to
+    1e-9 relative, printed numbers to their last digit, integers and words exactly, pictures
+    to 0.02 % of their pixels): a report says what its rows say, and no committed table or
+    picture is out of date (sharp_limit.md once lacked a paragraph of its notes). Byte
+    equality was a property of one machine: a fresh one rewrote sharp_limit.json's floats in
+    their 16th digit."""
     import shutil
     import subprocess
 
@@ -499,8 +504,43 @@ def test_committed_report_is_rebuilt_from_its_rows(name, tmp_path, monkeypatch):
     out_of = {"gallery": out / "gallery"}
     _load(STUDIES / f"{name}.py").main(["--report-only", "--out", str(out_of.get(name, out)),
                                         *REPORTS[name]])
-    changed = [f for f in files if (root / f).read_bytes() != (tmp_path / f).read_bytes()]
+    changed = {f: d for f in files
+               if (d := differences(f, (root / f).read_bytes(), (tmp_path / f).read_bytes()))}
     assert not changed, f"{name} --report-only changed {changed}"
+
+
+def test_report_comparison_keeps_meaning_and_catches_stale_reports():
+    """The report test's comparison (tests/report_compare.py): a float's last bits, a number
+    on a rounding boundary and a re-encoded equal picture pass; a changed count, a value
+    moved beyond its printed digits, a changed word, a float off by 1e-6 in JSON and a
+    changed picture fail."""
+    import io
+
+    from PIL import Image
+
+    assert not differences("a.json", b'{"order_e": 1.5264050679115821, "n": 3}',
+                           b'{"order_e": 1.526405067911581, "n": 3}')
+    assert differences("a.json", b'{"order_e": 1.5264050679115821}', b'{"order_e": 1.5264066}')
+    assert differences("a.json", b'{"n": 3}', b'{"n": 4}')
+    assert differences("a.json", b'{"a": 1, "b": 2}', b'{"b": 2, "a": 1}')
+    assert not differences("a.md", b"e = 4.452 (-21.7%)\n", b"e = 4.453 (-21.7%)\n")
+    assert differences("a.md", b"e = 4.452\n", b"e = 4.454\n")
+    assert differences("a.md", b"57 of 64 cells\n", b"58 of 64 cells\n")
+    assert differences("a.md", b"prolate 0.61\n", b"oblate 0.61\n")
+    assert differences("a.md", b"a\nb\n", b"a\n")
+
+    def png(value, spot=None, level=9):
+        im = Image.new("RGB", (100, 100), (value, value, value))
+        if spot is not None:
+            for i in range(30):
+                im.putpixel((i, i), spot)
+        buf = io.BytesIO()
+        im.save(buf, format="PNG", compress_level=level)
+        return buf.getvalue()
+
+    assert png(200, level=1) != png(200)
+    assert not differences("a.png", png(200, level=1), png(200))
+    assert differences("a.png", png(200), png(200, (0, 0, 0)))
 
 
 def test_committed_results_stay_under_5_mb():
