@@ -139,6 +139,10 @@ def ensure(folder: str | Path, scene=None, *, options: dict | Callable | None = 
     while True:
         summary = read_summary(folder)
         if summary is not None and summary.get("status") in ENDED:
+            other = _holds_another(folder, scene, options, after)
+            if other:
+                return Outcome(folder, Status.FAILED, summary, other,
+                               time.perf_counter() - t0)
             return Outcome(folder, summary["status"], summary,
                            seconds=time.perf_counter() - t0)
         if failed.is_file() and not retry_failed:
@@ -162,6 +166,36 @@ def ensure(folder: str | Path, scene=None, *, options: dict | Callable | None = 
         status = summary.get("status") if summary else Status.FAILED
         reason = "" if summary else "the run left no summary.json"
         return Outcome(folder, status, summary, reason, time.perf_counter() - t0, ran=True)
+
+
+def _holds_another(folder: Path, scene, options, after) -> str:
+    """Why an ended folder's run is not the one asked for ('' when it is, or when that
+    cannot be told here): its run.json against the run ``simulate(scene, **options)`` would
+    make — the scene as run and every choice a resume must match
+    (:func:`fem_ade.runs.run_identity`); with a start field (``after``, ``phi0``) the
+    initial condition is that field's, not compared. A ``make`` job, or a scene or options
+    given as functions (made only when a run starts), are the caller's to check: a sweep
+    compares each point's NAME.point.json (:func:`fem_ade.sweep.changed`)."""
+    if scene is None or callable(scene) or callable(options):
+        return ""
+    from .runs import _identity_difference, folder_identity, planned_identity
+
+    options = options or {}
+    try:
+        asked = planned_identity(scene, options)
+        held = folder_identity(folder)
+    except (ModelError, TypeError) as err:
+        return f"the folder holds a run that cannot be compared with the one asked for ({err})"
+    if after is not None or options.get("phi0") is not None:
+        for identity in (asked, held):
+            identity["scene"].pop("ic", None)
+    difference = _identity_difference(held, asked)
+    if difference is None:
+        return ""
+    difference = difference.replace("in the checkpoint", "in the folder").replace(
+        "in run.json", "asked for")
+    return (f"the folder holds another run ({difference}): give another folder, or remove "
+            "this one to run it anew")
 
 
 def _run(folder: Path, scene, options: dict, make, after, quiet: bool, restart: bool):

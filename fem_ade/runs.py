@@ -390,6 +390,31 @@ def run_identity(scene: Scene, config: RunConfig) -> dict:
                                  sort_keys=True, default=str))
 
 
+def planned_identity(scene, options: dict) -> dict:
+    """The :func:`run_identity` of the run ``simulate(scene, **options)`` would make (its
+    configuration built as simulate builds it, nothing run or written): what
+    :func:`fem_ade.jobs.ensure` compares with an ended folder's. ModelError or TypeError for
+    options simulate would refuse."""
+    scene = _scene_argument(scene)
+    config = RunConfig.build(scene, **{k: options[k] for k in _RUN_KEYWORDS if k in options})
+    return run_identity(scene_as_run(scene, config), config)
+
+
+def folder_identity(out: str | Path) -> dict:
+    """The :func:`run_identity` of the run a folder's run.json records; ModelError (one
+    line) if it has none or it is not a run's."""
+    out = Path(out)
+    try:
+        data = read_json(out / "run.json")
+        scene = scene_from_mapping(data["scene"], where=str(out / "run.json"))
+        config = RunConfig.from_mapping({k: v for k, v in data.items() if k != "scene"})
+    except ModelError as err:
+        raise ModelError(f"{out}: {err}") from None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+        raise ModelError(f"{out}: run.json is not a run's ({err!r})") from None
+    return run_identity(scene, config)
+
+
 def _identity_difference(stored: dict, current: dict, where: str = "") -> str | None:
     """The first field where two identities differ, as 'FIELD: A in the checkpoint, B in
     run.json', or None."""

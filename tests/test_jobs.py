@@ -30,6 +30,26 @@ def test_a_run_starts_then_is_skipped(tmp_path):
     assert (folder / "summary.json").stat().st_mtime_ns == stamp
 
 
+def test_an_ended_folder_of_another_run_is_not_its_result(tmp_path):
+    """An ended folder answers only for the run it holds: another scene or other options
+    (the backend's n, the scheme) give ``failed`` with the field that differs, run nothing and
+    change nothing; the same run is still skipped (issue 40: ensure returned the torus's
+    folder for the discocyte, ran = False, status completed)."""
+    folder = tmp_path / "a"
+    first = ensure(folder, SCENE, options=dict(OPTIONS, steps=10))
+    files = {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+    for scene, options, field in ((PAPER_SCENES["torus"], dict(OPTIONS, steps=10), "dt"),
+                                  (SCENE, dict(OPTIONS, steps=10, n=24), "n"),
+                                  (SCENE, dict(OPTIONS, steps=10, scheme="stabilized"),
+                                   "scheme")):
+        other = ensure(folder, scene, options=options)
+        assert other.status == Status.FAILED and not other.ran and not other.ok
+        assert "holds another run" in other.reason and field in other.reason
+        assert not failure_record(folder).exists()
+    assert {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()} == files
+    assert ensure(folder, SCENE, options=dict(OPTIONS, steps=10)).summary == first.summary
+
+
 def test_a_killed_run_is_resumed_to_the_uninterrupted_one(tmp_path):
     whole = ensure(tmp_path / "whole", SCENE, options=dict(OPTIONS, steps=20))
 
