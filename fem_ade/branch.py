@@ -42,7 +42,10 @@ the same side of --from: the branch goes on to it), ``branch.csv`` (one
 row per point: the parameter, e, E, W, G, unstable, label, fold, ...), ``branch.png`` (e
 against the parameter: stable solid, unstable dashed, folds marked) and ``shapes.png``
 (the meridians). Killed and started again with the same command, a branch goes on from its
-last points.
+last points — only from points it can vouch for (:func:`load_points`): each point's
+summary.json carries its ``integrity`` (the checksum of the branch's identity, its index, the
+checksums of its φ and its row), and a gap, a stranger, a copy, an edit or a folder without
+branch.json stops the resume with one line.
 """
 
 from __future__ import annotations
@@ -51,8 +54,10 @@ import argparse
 import csv
 import json
 import math
+import os
 import sys
 import time
+import zipfile
 from dataclasses import replace
 from pathlib import Path
 
@@ -84,8 +89,12 @@ EIGENVALUES, UNSTABLE, OFF_TANGENT = 4, -1e-6, 10.0
 #: 0.005, where converging ones take 250-500); the converging ones measured there stay below
 #: their first residual
 NEWTON_TOL, DIVERGED = 1e-12, 2.0
+#: the least arclength step, relative to the parameter's size: below it the parameter's
+#: derivative (a central difference) and the predictor's chords are round-off
+MIN_STEP = 1e-6
 COLUMNS = ("point", "e", "E", "W", "G", "V", "A", "dA", "v_surface", "da_surface",
-           "unstable", "lowest_eigenvalue", "label", "fold", "newton", "seconds")
+           "unstable", "lowest_eigenvalue", "label", "fold", "newton", "seconds", "newton_s",
+           "stability_s")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -129,16 +138,36 @@ def check_branch(params, param: str, start, stop, step, folds=None) -> None:
     """A branch's settings (ModelError, one line): the parameter (:func:`check_parameter`),
     two different ends, a step in (0, |to − from|], folds a whole number ≥ 0 or None."""
     check_parameter(params, param)
+
     def number(x):
         return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
     if not (number(start) and number(stop)) or start == stop:
         raise ModelError(f"--from and --to must be two different numbers, got {start}, {stop}")
-    if not (number(step) and 0 < step <= abs(stop - start)):
-        raise ModelError(f"--step must be in (0, |to - from|], got {step}")
+    if param == "v" and not (0 < start <= 1 and 0 < stop <= 1):
+        raise ModelError(f"--from and --to of the reduced volume v must be in (0, 1] (v = 1 "
+                         f"is the sphere), got {start}, {stop}")
+    span = abs(stop - start)
+    least = MIN_STEP * max(1.0, abs(start), abs(stop))
+    if not (number(step) and least <= step <= span * (1.0 + 1e-9)):
+        raise ModelError(f"--step must be in [{least:.3g}, |to - from| = {span:.6g}], got "
+                         f"{step}")
     if folds is not None and (isinstance(folds, bool) or not isinstance(folds, int)
                               or folds < 0):
         raise ModelError(f"--folds must be a whole number >= 0, got {folds}")
+
+
+def check_branch_name(branch) -> None:
+    """The sharp branch a followed branch stands for (the vesicle family's, but the sphere:
+    it is the point v = 1 of the prolate and the oblate)."""
+    from .registry import VESICLE_BRANCHES
+
+    if branch == "sphere":
+        raise ModelError("--branch sphere: the sphere is one point (v = 1) of the prolate and "
+                         "oblate branches; follow --branch prolate or oblate from it")
+    if branch not in VESICLE_BRANCHES:
+        raise ModelError(f"--branch must be one of {', '.join(VESICLE_BRANCHES)}, got "
+                         f"{branch!r}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -407,28 +436,129 @@ def describe_point(be, name: str, cont: Continuation, newton: int, seconds: floa
             "newton": newton, "seconds": round(seconds, 2), "theta": cont.theta}
 
 
-def save_point(out: Path, k: int, be, row: dict) -> None:
-    from .output import write_fields, write_json_atomic
+def _digest(text: bytes) -> str:
+    import hashlib
+
+    return hashlib.sha256(text).hexdigest()
+
+
+def identity_digest(identity: dict) -> str:
+    """The branch's identity (branch.json) as a checksum: what ties each point to it."""
+    return _digest(json.dumps(identity, sort_keys=True).encode())
+
+
+def field_digest(phi: np.ndarray) -> str:
+    """A point's φ as a checksum (its float64 values, little-endian)."""
+    return _digest(np.ascontiguousarray(phi, dtype="<f8").tobytes())
+
+
+#: a row's keys that are not the point's own: the checksum's record, and the fold, which
+#: its neighbours decide (:func:`mark_folds`)
+DERIVED = ("integrity", "fold")
+
+
+def row_digest(row: dict) -> str:
+    """A point's row as a checksum: its values as summary.json stores them, without
+    :data:`DERIVED`."""
+    from .output import _jsonable
+
+    plain = {k: v for k, v in row.items() if k not in DERIVED}
+    return _digest(json.dumps(_jsonable(plain), sort_keys=True).encode())
+
+
+def save_point(out: Path, k: int, be, row: dict, branch: str) -> dict:
+    """Point ``k`` in ``points/NNNN/``: final.npz (φ), then summary.json (its row and its
+    ``integrity``: the branch's :func:`identity_digest`, the index, φ's and the row's
+    checksums — the summary is written last, so a point cut short has none); the row as
+    saved."""
+    from .output import _jsonable, write_fields, write_json_atomic
 
     folder = out / "points" / f"{k:04d}"
     folder.mkdir(parents=True, exist_ok=True)
-    write_fields(folder / "final.npz", be.fields())
+    fields = be.fields()
+    write_fields(folder / "final.npz", fields)
+    row = json.loads(json.dumps(_jsonable({k_: v for k_, v in row.items()
+                                           if k_ not in DERIVED})))
+    row["integrity"] = {"branch": branch, "index": k, "phi": field_digest(fields["phi"]),
+                        "row": row_digest(row)}
     write_json_atomic(folder / "summary.json", row)
+    return row
 
 
-def load_points(out: Path) -> list[tuple[dict, np.ndarray]]:
-    """The saved points of a branch folder, in order: (row, φ); a point cut short (no
-    summary.json) ends the list."""
+def load_points(out: Path, branch: str | None = None, size: int | None = None,
+                param: str | None = None) -> list[tuple[dict, np.ndarray]]:
+    """The saved points of a branch folder, in order: (row, φ). Each is checked against the
+    branch (``branch``: its :func:`identity_digest`) — its index, its φ's and its row's
+    checksums, its φ's length (``size``); the folders must be 0000, 0001, … without a gap
+    or a stranger. Only the last may be cut short (final.npz without summary.json: a kill
+    between the two), and is left out. ModelError (one line) for anything else: a resume
+    never continues from points it cannot vouch for. Points written before the checksums
+    (no ``integrity``) are taken as they are, in their order."""
+    points = out / "points"
+    if not points.exists():
+        return []
+    if not points.is_dir():
+        raise ModelError(f"{points} is not a folder: {out} is not a branch folder this "
+                         "command can continue")
+    names = sorted(p.name for p in points.iterdir())
+    strangers = [n for n in names if not (len(n) == 4 and n.isdigit()
+                                          and (points / n).is_dir())]
+    if strangers:
+        raise ModelError(f"{points} holds {strangers[0]!r}, which is no point of a branch: "
+                         "remove it, or give another --out")
     found = []
-    for folder in sorted((out / "points").glob("[0-9][0-9][0-9][0-9]")):
+    for k, name in enumerate(names):
+        where = points / name
+        if name != f"{k:04d}":
+            raise ModelError(f"{points}: point {k:04d} is missing (next is {name}): the "
+                             f"branch's points have a gap; remove the points from {name} "
+                             "on to go on from the last whole one, or give another --out")
+        summary = where / "summary.json"
+        if not summary.exists() and k == len(names) - 1:
+            break  # cut short by a kill: made again
         try:
-            row = json.loads((folder / "summary.json").read_text())
-            with np.load(folder / "final.npz") as z:
-                phi = np.array(z["phi"])
-        except (OSError, ValueError, KeyError):
-            break
+            row = json.loads(summary.read_text())
+            with np.load(where / "final.npz") as z:
+                phi = np.array(z["phi"], dtype=float)
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
+            raise ModelError(f"{where} is not a whole point ({type(err).__name__}: "
+                             f"{str(err)[:80]}): remove it and the points after it, or give "
+                             "another --out") from None
+        _check_point(where, k, row, phi, branch, size, param)
         found.append((row, phi))
     return found
+
+
+def _check_point(where: Path, k: int, row, phi: np.ndarray, branch, size, param) -> None:
+    """ModelError (one line) where a saved point is not point ``k`` of this branch."""
+    def refuse(why):
+        raise ModelError(f"{where}: {why}; a resume continues only from its own branch's "
+                         "points: remove this point and those after it, or give another --out")
+
+    if not isinstance(row, dict):
+        refuse("its summary.json is not a table")
+    for key in (param, "e", "s", "theta") if param else ():
+        value = row.get(key, 0.0 if key in ("s", "theta") else None)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not \
+                math.isfinite(value):
+            refuse(f"its {key} is {value!r}, not a number")
+    if phi.ndim != 1 or (size is not None and phi.size != size) or not np.all(
+            np.isfinite(phi)):
+        refuse(f"its final.npz holds no finite field of this branch's {size} nodes")
+    record = row.get("integrity")
+    if record is None:  # written before the checksums
+        return
+    if not isinstance(record, dict):
+        refuse("its integrity record is not a table")
+    if branch is not None and record.get("branch") != branch:
+        refuse("it belongs to another branch (its integrity record names another)")
+    if record.get("index") != k:
+        refuse(f"it is point {record.get('index')!r} of its branch, not {k}")
+    if record.get("phi") != field_digest(phi):
+        refuse("its final.npz is not the field the point was saved with (changed or "
+               "replaced)")
+    if record.get("row") != row_digest(row):
+        refuse("its summary.json was changed after the point was saved")
 
 
 def write_table(out: Path, name: str, rows: list[dict]) -> None:
@@ -552,35 +682,40 @@ def crossing(a: list[dict], b: list[dict], name: str) -> float | None:
 def follow(scene, *, param: str, start: float, stop: float, step: float, out: Path,
            backend_options: dict | None = None, n: int | None = None, quiet: bool = False,
            max_points: int = 400, folds: int | None = None,
-           stable: bool = True) -> list[dict]:
+           stable: bool = True, branch: str | None = None) -> list[dict]:
     """Follow the branch of ``scene``'s seed in ``param`` from ``start`` to ``stop`` (module
     docstring); the rows of branch.csv. ``folds``: end the branch at the point after its
     ``folds + 1``-th fold (0: the stable part from a stable start; None: go on past folds).
-    ``stable=False``: no stability at the points (their ``unstable`` blank) — at ε = 0.005
-    it is most of a point's time (119 s of ~150 s on the prolate, 65105 unknowns)."""
+    ``stable=False``: no stability at the points (their ``unstable`` blank): at small ε the
+    stability is most of a point's time. ``branch``: the sharp branch the seed stands for
+    (the vesicle family's ``branch``); its first point must be one (ModelError otherwise: a
+    torus seed that relaxes into an oblate is not followed as a torus)."""
     from .backend import make_backend
     from .lock import FolderLock
-    from .output import write_json_atomic
 
     say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
+    check_follow(scene, param=param, start=start, stop=stop, step=step,
+                 backend_options=backend_options, n=n, folds=folds, branch=branch)
     options = {"geometry": "axisymmetric", **(backend_options or {})}
-    check_branch(scene.params, param, start, stop, step, folds)
+    out = _check_out(out)
     scene, config, identity = _branch_setup(scene, param, start, stop, step, n, options)
     if not stable:  # (absent when on: the folders of before stay theirs)
         identity["stability"] = False
     check = stability if stable else (lambda be: None)
-    out.mkdir(parents=True, exist_ok=True)
-    lock = FolderLock(out).acquire()
     try:
-        recorded = out / "branch.json"
-        if recorded.is_file() and json.loads(recorded.read_text()) != identity:
-            raise ModelError(f"{out} holds another branch (its branch.json differs); give "
-                             "another --out")
-        write_json_atomic(recorded, identity)
+        out.mkdir(parents=True, exist_ok=True)
+        lock = FolderLock(out).acquire()
+    except OSError as err:
+        raise ModelError(f"--out {out}: cannot make or lock it ({err.strerror or err})") from None
+    try:
+        identity = _open_folder(out, identity)
+        tag = identity_digest(identity)
         be = make_backend("fem", scene, n=config.n, dt=config.dt, scheme="stabilized",
                           constraints="exact", **options)
         cont = Continuation(be, param)
-        done = load_points(out) or [_first_point(be, param, cont, out, config.dt, say, check)]
+        done = load_points(out, tag, be.phi.size, param)
+        if not done:
+            done = [_first_point(be, param, cont, out, config.dt, say, check, tag, branch)]
         rows = [r for r, _ in done]
         for r, _ in done:
             cont.theta = r.get("theta", cont.theta)
@@ -596,7 +731,7 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
                 why = point
                 break
             row, phi = point
-            save_point(out, len(rows), be, row)
+            row = save_point(out, len(rows), be, row, tag)
             rows.append(row)
             done.append((row, phi.copy()))
             meridians.append((row[param], _curves(be)))
@@ -611,6 +746,90 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
     finally:
         lock.release()
     return rows
+
+
+def check_follow(scene, *, param: str, start: float, stop: float, step: float,
+                 backend_options: dict | None = None, n: int | None = None,
+                 folds: int | None = None, branch: str | None = None) -> None:
+    """What :func:`follow` checks before it makes anything, for a sweep to check its branch
+    points before they run (ModelError, one line): the parameter and the ends, the branch's
+    name, the geometry, and the run's configuration (n, order, the backend's options, the
+    scene a surface of revolution)."""
+    if backend_options is not None and not isinstance(backend_options, dict):
+        raise ModelError(f"backend_options must be a table, got {backend_options!r}")
+    options = {"geometry": "axisymmetric", **(backend_options or {})}
+    if options["geometry"] != "axisymmetric":
+        raise ModelError(f"a branch is followed in the axisymmetric geometry (its Newton "
+                         f"solves and stability are the (r, z) ones), not "
+                         f"geometry = {options['geometry']!r}")
+    check_branch(scene.params, param, start, stop, step, folds)
+    if branch is not None:
+        check_branch_name(branch)
+    _branch_setup(scene, param, start, stop, step, n, options)
+
+
+def _check_out(out) -> Path:
+    """``--out`` as a path a branch folder can be made in (ModelError, one line)."""
+    from .output import check_path_name
+
+    if not isinstance(out, (str, Path)) or str(out).strip() in ("", "."):
+        raise ModelError("--out needs a folder name (a new folder, or the branch's own)")
+    out = Path(out)
+    check_path_name(out)
+    if out.exists() and not out.is_dir():
+        raise ModelError(f"--out {out} exists and is not a folder")
+    parent = out if out.exists() else out.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ModelError(f"--out {out}: {parent} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ModelError(f"--out {out}: {parent} is not writable")
+    return out
+
+
+def _same_identity(stored: dict, identity: dict) -> bool:
+    """Whether a branch.json is this branch's: equal, where a folder made before a backend
+    option's default was written out (``order``) counts as having that default."""
+    if stored == identity:
+        return True
+    if not isinstance(stored, dict) or not isinstance(stored.get("options"), dict):
+        return False
+    from .fem.axisym import DEFAULT_ORDER
+
+    filled = {**stored, "options": {"order": DEFAULT_ORDER, **stored["options"]}}
+    return filled == identity
+
+
+def _open_folder(out: Path, identity: dict) -> dict:
+    """The branch folder ``out`` (locked) made this branch's: a new or empty one gets its
+    branch.json, one with this branch's is gone on with; ModelError (one line) for a folder
+    of another branch, one whose branch.json is not a branch's, or one that holds files but
+    no branch.json (a run folder; a branch whose record was removed, whose points could be
+    of any model). Returns the identity as branch.json holds it."""
+    from .output import contents, write_json_atomic
+
+    recorded = out / "branch.json"
+    if recorded.exists() or recorded.is_symlink():
+        try:
+            stored = json.loads(recorded.read_text())
+        except (OSError, ValueError) as err:
+            raise ModelError(f"{recorded} is not a branch's record ({type(err).__name__}): "
+                             "give another --out") from None
+        if not _same_identity(stored, identity):
+            from .runs import _identity_difference
+
+            why = _identity_difference(stored, identity) if isinstance(stored, dict) else None
+            why = "" if why is None else " (" + why.replace("in the checkpoint", "there").replace(
+                "in run.json", "now") + ")"
+            raise ModelError(f"{out} holds another branch{why}: give another --out")
+        return stored
+    if contents(out):
+        raise ModelError(f"{out} holds files but no branch.json: it is no branch folder (a "
+                         "run's, or a branch whose record was removed, so its points could "
+                         "be of any model); give a new or empty --out")
+    write_json_atomic(recorded, identity)
+    return identity
 
 
 def _branch_setup(scene, param: str, start: float, stop: float, step: float, n, options):
@@ -633,10 +852,11 @@ def _branch_setup(scene, param: str, start: float, stop: float, step: float, n, 
     return scene, config, json.loads(json.dumps(identity, default=str))
 
 
-def _first_point(be, param: str, cont, out: Path, dt: float, say, check
-                 ) -> tuple[dict, np.ndarray]:
+def _first_point(be, param: str, cont, out: Path, dt: float, say, check, tag: str,
+                 branch: str | None = None) -> tuple[dict, np.ndarray]:
     """The branch's first point: the seed relaxed to its steady state, then Newton's; saved
-    as point 0 (ModelError where Newton does not converge); ``check``: its stability."""
+    as point 0 (ModelError where Newton does not converge, or where it is not of
+    ``branch``); ``check``: its stability."""
     from .fem.newton import solve_steady
     from .loop import run_loop
 
@@ -645,12 +865,32 @@ def _first_point(be, param: str, cont, out: Path, dt: float, say, check
     newton = solve_steady(be, max_iterations=60)
     if not newton.converged:
         raise ModelError(f"the branch's first point did not converge: {newton.message}")
-    row = describe_point(be, param, cont, newton.iterations, time.perf_counter() - t0,
-                         check(be))
+    row = _timed_row(be, param, cont, newton.iterations, t0, check)
+    if branch is not None and not same_branch(branch, row["label"]):
+        label = row["label"]
+        article = "an" if str(label)[:1] in "aeiou" else "a"
+        raise ModelError(f"the {branch} seed at {param} = {cont.p:.6g} relaxed into {article} "
+                         f"{label}: the phase field has no steady {branch} there to "
+                         f"follow (try another --from, or --branch "
+                         f"{branch_of_label(row['label']) or row['label']})")
     row["s"] = 0.0
-    save_point(out, 0, be, row)
+    row = save_point(out, 0, be, row, tag)
     say(_line(param, row))
     return row, be.phi.copy()
+
+
+def _timed_row(be, param: str, cont, newton: int, t0: float, check) -> dict:
+    """The point's row once Newton (started at ``t0``) has converged: its stability
+    (``check``), its description, and its time — ``seconds`` all of it, ``newton_s`` and
+    ``stability_s`` its parts (the latter None without stability)."""
+    t1 = time.perf_counter()
+    eigenvalues = check(be)
+    t2 = time.perf_counter()
+    row = describe_point(be, param, cont, newton, 0.0, eigenvalues)
+    row["seconds"] = round(time.perf_counter() - t0, 2)
+    row["newton_s"] = round(t1 - t0, 2)
+    row["stability_s"] = None if eigenvalues is None else round(t2 - t1, 2)
+    return row
 
 
 def _end_of_branch(rows: list[dict], param: str, stop: float, direction: float,
@@ -696,7 +936,7 @@ def _next_point(be, cont, param: str, done: list, direction: float, ds: float,
     phi, p, its = corrected
     be._set(phi, None)
     cont.set_p(p)
-    row = describe_point(be, param, cont, its, time.perf_counter() - t0, check(be))
+    row = _timed_row(be, param, cont, its, t0, check)
     row["s"] = last_row.get("s", 0.0) + ds
     row["ds_next"] = min(ds * 1.5, ds_max) if its <= GROW_BELOW else ds
     return row, phi
@@ -767,7 +1007,8 @@ def _line(param, row) -> str:
             f"Newton {row['newton']}, {row['seconds']} s")
 
 
-def main(argv=None) -> int:
+def _parser() -> argparse.ArgumentParser:
+    """The command line's parser (its errors one line, exit 2)."""
     from .registry import VESICLE_BRANCHES
 
     ap = argparse.ArgumentParser(prog="python -m fem_ade.branch",
@@ -781,7 +1022,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True, help="the branch folder")
     ap.add_argument("--geometry", default="axisymmetric", choices=("axisymmetric",),
                     help="axisymmetric (the default and, for now, the only one)")
-    ap.add_argument("--n", type=int, help="cells per L (default: from eps)")
+    ap.add_argument("--n", type=int, help="nodes per L at the finest spacing, as for "
+                    "python -m fem_ade.run (default: 2.5 per eps)")
     ap.add_argument("--order", type=int, help="element order (default 8)")
     ap.add_argument("--folds", type=int, help="end the branch past this many folds (0: at "
                     "the first; default: go on past folds)")
@@ -798,13 +1040,27 @@ def main(argv=None) -> int:
         ap.exit(2, f"fem_ade.branch: error: {message}\n")
 
     ap.error = error
+    return ap
+
+
+def main(argv=None) -> int:
+    ap = _parser()
     args = ap.parse_args(argv)
+    from .interrupt import install
+
+    install()  # SIGTERM as SIGINT: the points saved so far stay, the command goes on later
     try:
         from .scenes import resolve_scene
 
         chosen = {k: getattr(args, k) for k in ("v", "da0", "kbar", "C", "eps", "R0",
                                                  "branch") if getattr(args, k) is not None}
+        if args.param in chosen:
+            raise ModelError(f"--{args.param} is the branch's parameter: it goes from --from "
+                             f"to --to (leave --{args.param} out)")
+        branch = None
         if args.scene == "vesicle":
+            branch = chosen.get("branch", "prolate")
+            check_branch_name(branch)
             scene = vesicle_for_branch(chosen, args.param, args.start, args.stop)
         elif chosen:
             raise ModelError("--v, --da0, ... describe the vesicle scene; give them with "
@@ -813,10 +1069,14 @@ def main(argv=None) -> int:
             scene = resolve_scene(args.scene)
         options = {} if args.order is None else {"order": args.order}
         follow(scene, param=args.param, start=args.start, stop=args.stop, step=args.step,
-               out=Path(args.out), backend_options=options, n=args.n, quiet=args.quiet,
-               folds=args.folds, stable=args.stable)
+               out=args.out, backend_options=options, n=args.n, quiet=args.quiet,
+               folds=args.folds, stable=args.stable, branch=branch)
     except ModelError as err:
         print(f"fem_ade.branch: error: {err}", file=sys.stderr)
+        return 2
+    except np.linalg.LinAlgError as err:
+        print(f"fem_ade.branch: error: a linear solve failed ({err}): the branch cannot go on "
+              "from here (a smaller --step, or another --from)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("fem_ade.branch: interrupted; the same command goes on from the last point",

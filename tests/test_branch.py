@@ -108,10 +108,194 @@ def test_a_branch_goes_further_with_another_end(branch, tmp_path):
         assert main([*args, "--out", str(out)]) == 2
 
 
+def _files(folder):
+    """Every file of a folder (the lock's files aside) and its bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and not p.name.startswith(".fem_ade")}
+
+
+def _edit_summary(key, value):
+    def edit(out):
+        path = out / "points" / "0002" / "summary.json"
+        row = json.loads(path.read_text())
+        if value is _DROP:
+            del row[key]
+        else:
+            row[key] = value
+        path.write_text(json.dumps(row))
+    return edit
+
+
+def _edit_field(change):
+    def edit(out):
+        path = out / "points" / "0002" / "final.npz"
+        with np.load(path) as z:
+            fields = {k: np.array(z[k]) for k in z.files}
+        fields["phi"] = change(fields["phi"])
+        np.savez(path, **fields)
+    return edit
+
+
+def _copy(a, b):
+    def edit(out):
+        import shutil
+
+        target = b
+        if b == "next":  # the point after the last
+            target = f"points/{len(list((out / 'points').iterdir())):04d}"
+        (shutil.copytree if (out / a).is_dir() else shutil.copy2)(out / a, out / target)
+    return edit
+
+
+def _remove(name):
+    def edit(out):
+        import shutil
+
+        path = out / name
+        shutil.rmtree(path) if path.is_dir() else path.unlink()
+    return edit
+
+
+def _write(name, data):
+    def edit(out):
+        path = out / name
+        if path.is_dir():
+            import shutil
+
+            shutil.rmtree(path)
+        elif path.exists():
+            path.unlink()
+        if data is _DIR:
+            path.mkdir()
+        else:
+            path.write_bytes(data)
+    return edit
+
+
+_DROP, _DIR = object(), object()
+
+
+@pytest.mark.parametrize("edit, word", [
+    (_remove("points/0001"), "gap"),  # 0002 would be read as 0001, 0003 written over 0002
+    (_copy("points/0001", "points/0009"), "gap"),  # a stray copy past the end
+    (_copy("points/0000", "next"), "point 0 of its branch"),  # one more point, a copy
+    (_copy("points/0000/final.npz", "points/0002/final.npz"), "final.npz"),
+    (_edit_field(lambda phi: phi + 1e-3), "final.npz"),
+    (_edit_field(lambda phi: np.where(np.arange(phi.size) == 7, np.nan, phi)), "finite"),
+    (_edit_field(lambda phi: phi[:-5]), "finite field"),
+    (_edit_summary("v", 0.932), "changed"), (_edit_summary("e", 1.0), "changed"),
+    (_edit_summary("label", "torus"), "changed"), (_edit_summary("theta", 2.0), "changed"),
+    (_edit_summary("v", "0.91"), "not a number"), (_edit_summary("v", _DROP), "not a number"),
+    (_edit_summary("v", [0.91]), "not a number"),
+    (_write("points/0002/summary.json", b"[1, 2]"), "not a table"),
+    (_write("points/0002/summary.json", b"{"), "not a whole point"),
+    (_write("points/0002/final.npz", b"PK\x03\x04 truncated"), "not a whole point"),
+    (_write("points/0002/final.npz", b""), "not a whole point"),
+    (_write("points/stray.txt", b"x"), "no point of a branch"),
+    (_write("points/0001/summary.json", _DIR), "not a whole point"),
+    (_remove("points/0001/summary.json"), "not a whole point"),  # only the last may lack it
+    (_write("branch.json", b""), "not a branch's record"),
+    (_write("branch.json", b"{no"), "not a branch's record"),
+    (_write("branch.json", _DIR), "not a branch's record"),
+    (_remove("branch.json"), "no branch.json"),
+])
+def test_a_resume_never_continues_from_points_it_cannot_vouch_for(branch, tmp_path, capsys,
+                                                                   edit, word):
+    """Issue 40: a branch folder is trusted only as far as its checksums go. A gap, a
+    stranger, a copied or edited point, a field not the one saved, a branch.json that is not
+    a branch's or is missing: the resume (here with a further --to) stops with one line and
+    exit 2, and writes nothing — where the code before lost points (a removed 0001: 0002 read
+    as 0001, the next point written over 0002) or continued from a copy or an edit."""
+    import shutil
+
+    out = tmp_path / "b"
+    shutil.copytree(branch, out)
+    edit(out)
+    before = _files(out)
+    args = list(ARGS)
+    args[args.index("--to") + 1] = "0.87"
+    code = main([*args, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and word in err, err
+    assert _files(out) == before
+
+
+def test_a_branch_folder_without_its_record_is_not_gone_on_with_in_another_model(
+        branch, tmp_path, capsys):
+    """branch.json removed, then the command of another model (--C, --kbar --da0): the old
+    points are not kept under it (the code before went on: one branch.csv, two models); a
+    run folder is no branch folder either."""
+    import shutil
+
+    from fem_ade.runs import simulate
+
+    out = tmp_path / "b"
+    shutil.copytree(branch, out)
+    (out / "branch.json").unlink()
+    for extra in (["--C", "0.5"], ["--kbar", "1", "--da0", "1.05"]):
+        assert main([*ARGS, *extra, "--out", str(out)]) == 2
+        assert "no branch.json" in capsys.readouterr().err
+    run = tmp_path / "run"
+    simulate("discocyte", backend="spectral", n=16, steps=2, out=run, render=False,
+             allow_underresolved=True)
+    assert main([*ARGS, "--out", str(run)]) == 2
+    assert "no branch.json" in capsys.readouterr().err
+
+
+def test_sigterm_stops_a_branch_in_one_line_and_it_goes_on(branch, tmp_path):
+    """SIGTERM (a scheduler's kill) once a point is saved: one line, exit 130 (there was no
+    handler: rc -15, nothing said), and the same command then ends as the uninterrupted
+    branch."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "fem_ade.branch", *ARGS, "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    t0 = time.time()
+    while time.time() < t0 + 300 and proc.poll() is None and \
+            not (out / "points" / "0001" / "summary.json").exists():
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    err = proc.communicate(timeout=120)[1]
+    if proc.returncode == 0:
+        pytest.skip("the branch ended before the signal")
+    assert proc.returncode == 130 and len(err.strip().splitlines()) == 1, (proc.returncode, err)
+    assert "interrupted" in err
+    assert main([*ARGS, "--out", str(out)]) == 0
+    assert [r["E"] for r in rows(out)] == [r["E"] for r in rows(branch)]
+
+
+def test_a_point_cut_short_is_made_again(branch, tmp_path):
+    """A kill between a point's final.npz and its summary.json leaves the last folder
+    without its summary: the resume makes that point again and ends as the whole branch."""
+    import shutil
+
+    out = tmp_path / "cut"
+    shutil.copytree(branch, out)
+    last = sorted((out / "points").iterdir())[-1]
+    (last / "summary.json").unlink()
+    assert main([*ARGS, "--out", str(out)]) == 0
+    assert [r["E"] for r in rows(out)] == [r["E"] for r in rows(branch)]
+
+
+def test_a_points_time_is_all_of_it(branch):
+    """branch.csv's seconds is the whole point — Newton and the stability (it once left the
+    stability out) — and its parts are said."""
+    for r in rows(branch):
+        total, newton, check = (float(r[k]) for k in ("seconds", "newton_s", "stability_s"))
+        assert newton > 0 and check > 0 and total >= newton + check - 0.02
+
+
 @pytest.mark.parametrize("extra, word", [
     (["--param", "da0"], "da0"), (["--step", "0"], "--step"),
     (["--folds", "-1"], "--folds"),
     (["--to", "0.95"], "two different"),
+    (["--step", "1e-300"], "--step"), (["--to", "1.05"], "(0, 1]"),
+    (["--from", "0"], "v must be"), (["--v", "0.7"], "branch's parameter"),
+    (["--branch", "sphere"], "one point"),
 ])
 def test_branch_mistakes_are_one_line(tmp_path, capsys, extra, word):
     args = list(ARGS)
