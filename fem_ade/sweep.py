@@ -541,15 +541,19 @@ def check_sweep(sweep: Sweep) -> None:
         except ModelError as err:
             raise ModelError(f"point {point.name}: {err}") from None
     first = points[0]
-    if sweep.branch:  # the first point's scene, each point's ends
-        from .branch import check_branch
+    if sweep.branch:  # each point's scene, ends and run, as follow checks them
+        from .branch import check_follow
 
-        params = first.scene(sharp_seed=False).params  # (what check_parameter reads)
         for point in points:
             b = point.branch
             try:
-                check_branch(params, b["param"], b["from"], b["to"], b["step"], b["folds"])
-            except (ModelError, TypeError) as err:
+                run = point.run  # (n, backend_options: _branch_run)
+                options = run.get("backend_options")
+                check_follow(point.scene(sharp_seed=False), param=b["param"],
+                             start=b["from"], stop=b["to"], step=b["step"], folds=b["folds"],
+                             n=run.get("n"), backend_options=options,
+                             branch=point.seed if point.base == "vesicle" else None)
+            except (ModelError, TypeError, KeyError) as err:
                 raise ModelError(f"point {point.name}: {err}") from None
         return
     listed = {spec["name"] for spec in sweep.listed}
@@ -663,6 +667,9 @@ def _follow(point: Point, folder: Path) -> None:
                   step=b["step"], out=folder, n=point.run.get("n"),
                   backend_options=point.run.get("backend_options"), quiet=True,
                   folds=b["folds"], stable=b.get("stability", True))
+    # (no branch= check of the first point's shape: a sweep follows what its seed relaxes
+    # to, and its table's label says what that is — studies/branches.py sets aside a seed
+    # that is not on its branch, with the reason, in its report)
     last = rows[-1]
     write_json_atomic(folder / "summary.json", {
         "status": Status.COMPLETED, "branch": b, "points": len(rows), "end": last[b["param"]],
@@ -731,6 +738,8 @@ def check_out(out: Path) -> None:
 #: in the driver's own process); the same in one process with the variable set, 5.9-6.4 s.
 #: The workers of a LocalCluster are started without it (docs/cluster.md: external workers)
 NANNY_ENVIRON = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+#: the -W option of multiprocessing's resource tracker (:func:`connect`)
+QUIET_TRACKER = "ignore:resource_tracker:UserWarning"
 
 
 def connect(scheduler: str | None, workers: int):
@@ -742,6 +751,12 @@ def connect(scheduler: str | None, workers: int):
     from dask.distributed import Client, LocalCluster
 
     if scheduler is None:
+        # Workers stopped mid-point (Ctrl-C, SIGTERM) leave their semaphores to
+        # multiprocessing's resource tracker, which frees them and then warns, on stderr after
+        # the sweep's one line: "There appear to be 2 leaked semaphore objects". The tracker
+        # is a process of its own started with this interpreter's -W options: ignore it there.
+        if QUIET_TRACKER not in sys.warnoptions:
+            sys.warnoptions.append(QUIET_TRACKER)
         if os.environ.get("MALLOC_TRIM_THRESHOLD_") == "65536":  # a Dask nanny's, left in this
             del os.environ["MALLOC_TRIM_THRESHOLD_"]              # process: workers inherit it
         with dask.config.set(NANNY_ENVIRON):
@@ -839,7 +854,13 @@ def _row_of_summary(out: dict, s: dict, seed: dict) -> dict:
 
 
 def _row_of_branch(out: dict, s: dict) -> dict:
+    from .branch import row_digest
+
     last = s["last"]
+    record = last.get("integrity")
+    if isinstance(record, dict) and record.get("row") != row_digest(last):
+        return {**out, "status": Status.DAMAGED,
+                "reason": "its summary.json's last point was changed after it was saved"}
     out.update(status=s["status"], steps=s["points"], end=s["end"],
                folds=" ".join(str(f) for f in s["folds"]),
                **{k: last.get(k) for k in ("E", "W", "G", "e", "label", "v_surface",
@@ -1032,8 +1053,9 @@ def main(argv=None) -> int:
     def stop(signum, frame):  # a kill ends the sweep as Ctrl-C does: workers closed
         raise KeyboardInterrupt
 
-    if argv is None:
+    if argv is None:  # SIGINT too: a shell that starts us in the background has it ignored
         signal.signal(signal.SIGTERM, stop)
+        signal.signal(signal.SIGINT, stop)
     try:
         if args.workers < 1:
             raise ModelError(f"--workers must be >= 1, got {args.workers}")
