@@ -148,7 +148,7 @@ class BackendBase:
         scene.validate()
         least = cls.min_cells(**options)
         if not isinstance(n, int) or isinstance(n, bool) or n < least:
-            raise ModelError(f"n must be an integer >= {least}, got {n}")
+            raise ModelError(f"n must be an integer >= {least}, got {n!r}")
         spacing = cls.check_options(scene, n, **options)
         check_resolution(params, n, dt, allow_underresolved=allow_underresolved,
                          check_dt=scheme == "paper", spacing=spacing, min_n=least)

@@ -114,13 +114,13 @@ class RunConfig:
             raise ModelError(f"--perturb must be a number >= 0, got {self.perturb!r}")
         if not is_int(self.seed, 0):
             raise ModelError(f"--seed must be an integer >= 0, got {self.seed!r}")
-        check_backend(self.backend, scene, n=self.n, dt=self.dt, scheme=self.scheme,
-                      constraints=self.constraints, allow_underresolved=allow_underresolved,
-                      **self.backend_options)
         check_loop_options(steps=self.steps, until_steady=self.until_steady,
                            max_steps=self.max_steps, every=self.every,
                            checkpoint_every=self.checkpoint_every,
                            save_every=self.save_every, shape_every=self.shape_every)
+        check_backend(self.backend, scene, n=self.n, dt=self.dt, scheme=self.scheme,
+                      constraints=self.constraints, allow_underresolved=allow_underresolved,
+                      **self.backend_options)
         if self.adaptive is not None:
             if not isinstance(self.adaptive, dict):
                 raise ModelError(f"adaptive must be a table, got {self.adaptive!r}")
@@ -174,6 +174,6 @@ def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_ever
         if value is None:
             continue
         if not is_int(value, low):
-            raise ModelError(f"--{name} must be an integer >= {low}, got {value}")
+            raise ModelError(f"--{name} must be an integer >= {low}, got {value!r}")
     if until_steady is not None and not (is_real(until_steady) and until_steady > 0):
         raise ModelError(f"--until-steady must be a positive number, got {until_steady}")

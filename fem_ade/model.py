@@ -262,7 +262,7 @@ def check_resolution(params: Params, n: int, dt: float, *, allow_underresolved: 
     exceed ε unless ``allow_underresolved``.
     """
     if not isinstance(n, int) or isinstance(n, bool) or n < min_n:
-        raise ModelError(f"n must be an integer >= {min_n}, got {n}")
+        raise ModelError(f"n must be an integer >= {min_n}, got {n!r}")
     if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
         raise ModelError(f"the time step must be positive, got dt = {dt}")
     limit = max_stable_dt(params)

@@ -124,9 +124,9 @@ class Scene:
         if self.dim not in (2, 3):
             raise ModelError(f"dim must be 2 or 3, got {self.dim}")
         if not (isinstance(self.steps, int) and self.steps >= 0):
-            raise ModelError(f"steps must be an integer >= 0, got {self.steps}")
+            raise ModelError(f"steps must be an integer >= 0, got {self.steps!r}")
         if not (isinstance(self.n, int) and self.n >= 8):
-            raise ModelError(f"n must be an integer >= 8, got {self.n}")
+            raise ModelError(f"n must be an integer >= 8, got {self.n!r}")
         if not (math.isfinite(self.dt) and self.dt > 0):
             raise ModelError(f"dt must be a positive number, got {self.dt}")
         box = p.L**self.dim
