@@ -560,6 +560,10 @@ def write_report(out: Path, result: dict, pf: dict, sharp: dict, suffix: str) ->
              "R₀ for all its branches; the sharp membrane (`sharp_ref`) continued along m₀. "
              "e = (W + G)/W_sphere. The lowest branch among prolate, pear, oblate, "
              "stomatocyte and torus where each exists.", "",
+             "**Made with older branch code, not rerun**: the lines were followed at "
+             "e4098a1, before the continuation's predictor (ef4c570, 62a7cce, 69ffa05) and "
+             "its stability without the translation mode (91c4ae2) changed; the notes below "
+             "say what moved where the branches were followed again.", "",
              f"**The phase field's lowest branch is the sharp one's at {agree} of "
              f"{len(pts)} grid points.**", "",
              "| v | R₀ (ε/R₀) | " + " | ".join(f"Δa₀ = {d:g}" for d in
