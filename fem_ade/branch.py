@@ -76,11 +76,11 @@ PARAMETERS = ("v", "da0", "kbar", "C")
 #: of 1.1-10, the last 2-3 quadratically: the exact Newton method outside its small
 #: quadratic basin (:mod:`fem_ade.fem.newton`), not an inexact solve
 MAX_NEWTON, GROW_BELOW = 12, 4
-#: the lowest eigenvalues computed at each point (stability), the eigenvalue (in units of P,
-#: Newton's bulk Hessian) below which a direction counts as unstable (the shape modes' are
-#: 1e-4 … 1e-2 in these units), and where the directions off the constraints' tangent space
-#: are put (:func:`stability`)
-EIGENVALUES, UNSTABLE, OFF_TANGENT = 4, -1e-6, 10.0
+#: the lowest eigenvalues of the m = 0 block computed at each point (stability; the
+#: threshold below which a direction counts as unstable: :data:`fem_ade.stability.UNSTABLE`)
+EIGENVALUES = 4
+#: the most azimuthal modes a branch computes at each point, and the command line's default
+MAX_MODES, DEFAULT_MODES = 32, 8
 #: a Newton correction is converged when its decrement |∇Lᵀδφ|/|E| (relative energy, as in
 #: :func:`fem_ade.fem.newton.solve_steady`) is below this and its |δp| below 1e-9·max(|p|, 1),
 #: and
@@ -322,8 +322,8 @@ class Continuation:
             if not size <= DIVERGED * first:  # diverging: a shorter step, before the solves
                 return None
             Fp = self.parameter_derivative(phi, lin.lam)
-            x1, _ = kkt_solve(self.sys, lin, -R)
-            x2, _ = kkt_solve(self.sys, lin, -Fp)
+            X, _ = kkt_solve(self.sys, lin, -np.column_stack([R, Fp]))
+            x1, x2 = X[:, 0], X[:, 1]
             n = phi.size
             g = self.theta * self.inner(t_phi, phi - phi_k) + t_p * (p - p_k) - ds
             denom = self.theta * self.inner(t_phi, x2[:n]) + t_p
@@ -343,60 +343,28 @@ class Continuation:
 
 
 def stability(be, k: int = EIGENVALUES) -> np.ndarray:
-    """The ``k`` lowest eigenvalues of H_L v = λ P v on {Cᵀv = 0} at the backend's state
-    (module docstring), ascending: ARPACK (``eigsh``, regular mode with P⁻¹ the step's exact
-    solve) on the projected operator ΠᵀH_LΠ + σ_c·C(CᵀP⁻¹C)⁻¹Cᵀ, where Π = I − P⁻¹C(CᵀP⁻¹C)⁻¹Cᵀ
-    is the P-orthogonal projector onto the constraints' tangent space and the second term
-    moves the directions off it to λ = σ_c, far above the shape modes. Against a dense
-    solve of the same problem (ε = 0.03, 3577 unknowns, three points across a fold): equal to
-    7 digits, 113–126 products, 0.1 s each; LOBPCG (the method before) missed the negative
-    eigenvalue past that fold and a near-double one before it.
+    """The ``k`` lowest eigenvalues of H_L v = λ P v on {Cᵀv = 0} at the backend's state,
+    ascending: in the axisymmetric geometry the azimuthal block m = 0
+    (:func:`fem_ade.fem.modes.lowest`: shift-invert Lanczos on a sparse LU of the bordered
+    H − σP; the z-translation taken out), elsewhere :func:`fem_ade.stability.cartesian`
+    (ARPACK in regular mode, the rigid motions taken out). Both equal a dense solve of the
+    same problem; the two agree to 3e-12 on the prolate at ε = 0.02 (m = 0).
 
-    C = (∇V, ∇A, P t) with t = ∂φ/∂z in the axisymmetric geometry (:func:`translation`): a
-    shape's translation along the axis is a zero mode of the continuous problem, which the
-    mesh pins with a small energy of either sign. Counted (with Newton's pin ∇T in its
-    place, which a slight tilt of the bulk φ satisfies), it made isolated points of the
-    prolate at ε = 0.01, v 0.95 → 0.6 "unstable" (v = 0.668, 0.624, 0.609: lowest −1.9e-6 …
-    −2.7e-4 between neighbours at +1.6e-5 … +1.4e-4; its eigenvector 0.83 along the
-    translation); without it the lowest is the next shape mode, smooth along the branch
-    (1.05e-4 … 1.76e-4 there, measured)."""
-    from scipy.sparse.linalg import LinearOperator, eigsh
-
-    from .fem.newton import NewtonSystem, linearize
-
-    sys_ = NewtonSystem(be)
-    lin = linearize(sys_, be.phi.copy())
-    step, N = sys_.step, be.phi.size
-    p = be.params
-    a, c, ke = 4.0 * p.kappa / p.eps**3, 4.0 * p.kappa / p.eps, p.kappa * p.eps
-    w, K = be.space.weights, be.space.K
-
-    def P(x):
-        Kx = K @ np.ravel(x)
-        return a * w * np.ravel(x) + c * Kx + ke * (K @ (Kx / w))
-
-    Cs = list(lin.C[:2])
+    C = (∇V, ∇A, P t) with t = ∂φ/∂z in the axisymmetric geometry: a shape's translation
+    along the axis is a zero mode of the continuous problem, which the mesh pins with a
+    small energy of either sign. Counted (with Newton's pin ∇T in its place, which a slight
+    tilt of the bulk φ satisfies), it made isolated points of the prolate at ε = 0.01,
+    v 0.95 → 0.6 "unstable" (v = 0.668, 0.624, 0.609: lowest −1.9e-6 … −2.7e-4 between
+    neighbours at +1.6e-5 … +1.4e-4; its eigenvector 0.83 along the translation); without it
+    the lowest is the next shape mode, smooth along the branch (1.05e-4 … 1.76e-4 there,
+    measured)."""
     if getattr(be, "geometry", "cartesian") == "axisymmetric":
-        Cs.append(P(translation(be)))
-    C = np.column_stack(Cs)
-    Y = np.column_stack([sys_.P_inverse(cj) for cj in Cs])
-    G = np.linalg.inv(C.T @ Y)
+        from .stability import axisymmetric
 
-    def tangent(x):  # Π x
-        return x - Y @ (G @ (C.T @ x))
+        return np.asarray(axisymmetric(be, (0,), k).modes[0])
+    from .stability import cartesian
 
-    def H(x):
-        x = np.ravel(x)
-        y = tangent(x)
-        h = (step.hessian_vector(lin.phi, lin.mu, lin.Kphi, y)
-             + step.constraint_hessian_vector(lin.phi, lin.Kphi, y, lin.lam[0], lin.lam[1]))
-        return h - C @ (G @ (Y.T @ h)) + OFF_TANGENT * (C @ (G @ (C.T @ x)))
-
-    ops = [LinearOperator((N, N), matvec=f, dtype=float)
-           for f in (H, P, lambda x: sys_.P_inverse(np.ravel(x)))]
-    vals = eigsh(ops[0], k=k, M=ops[1], Minv=ops[2], which="SA", tol=1e-9,
-                 return_eigenvectors=False, v0=np.ones(N))
-    return np.sort(vals)
+    return np.asarray(cartesian(be, k).eigenvalues)
 
 
 def translation(be) -> np.ndarray:
@@ -414,26 +382,31 @@ def translation(be) -> np.ndarray:
 # the branch folder
 # ---------------------------------------------------------------------------------------------
 def describe_point(be, name: str, cont: Continuation, newton: int, seconds: float,
-                   eigenvalues: np.ndarray | None) -> dict:
-    """A point's row; ``eigenvalues`` None: its stability not computed (``unstable`` and
-    ``lowest_eigenvalue`` None)."""
+                   stab) -> dict:
+    """A point's row; ``stab`` its :class:`fem_ade.stability.Stability` (None: not computed:
+    ``unstable`` and ``lowest_eigenvalue`` None): the m = 0 block's ``eigenvalues``, its
+    unstable count, and with azimuthal modes the lowest eigenvalue of each
+    (``lowest_mM``) and the count of unstable 3D directions (``unstable_3d``)."""
     from .sharp import reduced_energy
 
     final = be.diagnostics()
     shape, _ = be.describe_final(final)
     sharp = (shape or {}).get("sharp") or {}
-    if eigenvalues is None:
-        eigenvalues, unstable = np.zeros(0), None
-    else:
-        unstable = int(np.sum(eigenvalues < UNSTABLE))
-    return {name: cont.p, "e": reduced_energy(final, be.params.kappa),
-            **{k: final[k] for k in ("E", "W", "G", "V", "A", "dA")},
-            "v_surface": sharp.get("reduced_volume"),
-            "da_surface": sharp.get("reduced_area_difference"),
-            "label": (shape or {}).get("label"), "unstable": unstable,
-            "eigenvalues": [float(x) for x in eigenvalues],
-            "lowest_eigenvalue": float(eigenvalues[0]) if len(eigenvalues) else None,
-            "newton": newton, "seconds": round(seconds, 2), "theta": cont.theta}
+    eigenvalues = np.zeros(0) if stab is None else np.asarray(stab.modes[0])
+    row = {name: cont.p, "e": reduced_energy(final, be.params.kappa),
+           **{k: final[k] for k in ("E", "W", "G", "V", "A", "dA")},
+           "v_surface": sharp.get("reduced_volume"),
+           "da_surface": sharp.get("reduced_area_difference"),
+           "label": (shape or {}).get("label"),
+           "unstable": None if stab is None else int(stab.unstable[0]),
+           "eigenvalues": [float(x) for x in eigenvalues],
+           "lowest_eigenvalue": float(eigenvalues[0]) if len(eigenvalues) else None,
+           "newton": newton, "seconds": round(seconds, 2), "theta": cont.theta}
+    if stab is not None and len(stab.modes) > 1:
+        row.update({f"lowest_m{m}": stab.lowest(m) for m in stab.modes})
+        row["unstable_3d"] = int(stab.unstable_3d)
+        row["unstable_modes"] = {str(m): int(n) for m, n in stab.unstable.items()}
+    return row
 
 
 def _digest(text: bytes) -> str:
@@ -561,10 +534,18 @@ def _check_point(where: Path, k: int, row, phi: np.ndarray, branch, size, param)
         refuse("its summary.json was changed after the point was saved")
 
 
+def mode_columns(rows: list[dict]) -> list[str]:
+    """The azimuthal modes' columns of a branch's rows: lowest_m0 … lowest_mM, unstable_3d
+    (none for a branch without modes)."""
+    modes = sorted({int(k[len("lowest_m"):]) for r in rows for k in r
+                    if k.startswith("lowest_m")})
+    return [f"lowest_m{m}" for m in modes] + (["unstable_3d"] if modes else [])
+
+
 def write_table(out: Path, name: str, rows: list[dict]) -> None:
     from .output import csv_cell
 
-    cols = (name, *COLUMNS[1:])
+    cols = (name, *COLUMNS[1:], *mode_columns(rows))
     tmp = out / "branch.csv.tmp"
     with open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
@@ -598,6 +579,41 @@ def mark_folds(rows: list[dict], name: str) -> list[dict]:
     return rows
 
 
+def bifurcations(rows: list[dict], name: str) -> list[dict]:
+    """Where a mode's count of unstable directions changes between two neighbouring points
+    (``unstable_modes``, the LU's inertia): a branch point of mode m — m ≥ 1 a
+    non-axisymmetric branch is born (in 3D a circle of them, cos mθ and sin mθ), m = 0
+    without a fold between the two points an axisymmetric symmetry-breaking one (at a fold
+    the m = 0 count changes too: that is the fold, in ``fold``). Located like the folds: the
+    zero of the mode's lowest eigenvalue, linear in the arclength between the two points
+    (where the count changed from 0 or to 0; else the midpoint, ``located`` False), and the
+    parameter there."""
+    out = []
+    for i in range(len(rows) - 1):
+        a, b = rows[i], rows[i + 1]
+        ca, cb = a.get("unstable_modes"), b.get("unstable_modes")
+        if not (isinstance(ca, dict) and isinstance(cb, dict)):
+            continue
+        for key in sorted(set(ca) & set(cb), key=int):
+            if ca[key] == cb[key]:
+                continue
+            m = int(key)
+            if m == 0 and (a.get("fold") or b.get("fold")):
+                continue
+            la, lb = a.get(f"lowest_m{m}"), b.get(f"lowest_m{m}")
+            sa, sb = float(a.get("s", i)), float(b.get("s", i + 1))
+            located = min(ca[key], cb[key]) == 0 and la is not None and lb is not None \
+                and la * lb < 0
+            t = la / (la - lb) if located else 0.5
+            s_star = sa + t * (sb - sa)
+            out.append({"m": m, name: float(a[name] + t * (b[name] - a[name])), "s": s_star,
+                        "between": [i, i + 1], "unstable": [ca[key], cb[key]],
+                        "located": bool(located),
+                        "kind": f"non-axisymmetric (m = {m})" if m else
+                        "axisymmetric symmetry breaking (m = 0, no fold)"})
+    return out
+
+
 def draw(out: Path, name: str, rows: list[dict], meridians: list) -> list[Path]:
     import matplotlib
 
@@ -610,20 +626,31 @@ def draw(out: Path, name: str, rows: list[dict], meridians: list) -> list[Path]:
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     x = np.array([r[name] for r in rows])
     e = np.array([r["e"] for r in rows])
-    stable = np.array([r["unstable"] in (0, None, "") for r in rows])  # None: not computed
+    count = "unstable_3d" if any(r.get("unstable_3d") not in (None, "") for r in rows) \
+        else "unstable"  # stable in 3D where the azimuthal modes were computed
+    stable = np.array([r.get(count) in (0, None, "") for r in rows])  # None: not computed
     for i in range(len(rows) - 1):
         both = stable[i] and stable[i + 1]
         ax.plot(x[i:i + 2], e[i:i + 2], "-" if both else "--", color="tab:blue" if both
                 else "tab:red", lw=1.8)
     known = any(r["unstable"] not in (None, "") for r in rows)
     ax.plot(x[stable], e[stable], "o", ms=3, color="tab:blue",
-            label="stable" if known else "stability not computed")
+            label=("stable in 3D" if count == "unstable_3d" else "stable (axisymmetric "
+                   "perturbations)") if known else "stability not computed")
     ax.plot(x[~stable], e[~stable], "o", ms=3, color="tab:red", label="unstable")
     for r in rows:
         if r.get("fold"):
             ax.plot([float(r["fold"])], [r["e"]], "k*", ms=11)
+    for b in bifurcations(rows, name):
+        i, j = b["between"]
+        t = (b[name] - x[i]) / (x[j] - x[i]) if x[j] != x[i] else 0.5
+        eb = e[i] + t * (e[j] - e[i])
+        ax.plot([b[name]], [eb], "D", ms=7, mfc="none", mec="tab:green")
+        ax.annotate(f"m={b['m']}", (b[name], eb), textcoords="offset points",
+                    xytext=(4, 6), fontsize=8, color="tab:green")
     ax.set(xlabel=name, ylabel="e = (W + G) / W_sphere",
-           title=f"branch ({rows[0].get('label')} at {name} = {rows[0][name]:.4g}); ★ fold")
+           title=f"branch ({rows[0].get('label')} at {name} = {rows[0][name]:.4g}); ★ fold, "
+                 "◇ bifurcation (its mode m)")
     ax.legend(fontsize=8)
     fig.tight_layout()
     save_figure(fig, out / "branch.png", dpi=110, colours=64)
@@ -682,16 +709,22 @@ def crossing(a: list[dict], b: list[dict], name: str) -> float | None:
 def follow(scene, *, param: str, start: float, stop: float, step: float, out: Path,
            backend_options: dict | None = None, n: int | None = None, quiet: bool = False,
            max_points: int = 400, folds: int | None = None,
-           stable: bool = True, branch: str | None = None) -> list[dict]:
+           stable: bool = True, branch: str | None = None, modes: int = 0) -> list[dict]:
     """Follow the branch of ``scene``'s seed in ``param`` from ``start`` to ``stop`` (module
     docstring); the rows of branch.csv. ``folds``: end the branch at the point after its
     ``folds + 1``-th fold (0: the stable part from a stable start; None: go on past folds).
     ``stable=False``: no stability at the points (their ``unstable`` blank): at small ε the
     stability is most of a point's time. ``branch``: the sharp branch the seed stands for
     (the vesicle family's ``branch``); its first point must be one (ModelError otherwise: a
-    torus seed that relaxes into an oblate is not followed as a torus)."""
+    torus seed that relaxes into an oblate is not followed as a torus). ``modes``: the
+    azimuthal modes m = 1 … modes too (docs/model.md §13): each point's lowest eigenvalue
+    per mode, its 3D unstable count, and the bifurcations where a mode's lowest eigenvalue
+    crosses zero (bifurcations.json, branch.png)."""
+    if isinstance(modes, bool) or not isinstance(modes, int) or not 0 <= modes <= MAX_MODES:
+        raise ModelError(f"--modes must be a whole number from 0 to {MAX_MODES}, got {modes!r}")
     from .backend import make_backend
     from .lock import FolderLock
+    from .output import write_json_atomic
 
     say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
     check_follow(scene, param=param, start=start, stop=stop, step=step,
@@ -701,7 +734,9 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
     scene, config, identity = _branch_setup(scene, param, start, stop, step, n, options)
     if not stable:  # (absent when on: the folders of before stay theirs)
         identity["stability"] = False
-    check = stability if stable else (lambda be: None)
+    if stable and modes:  # (absent for modes = 0: the folders of before stay theirs)
+        identity["modes"] = modes
+    check = _checker(stable, modes)
     try:
         out.mkdir(parents=True, exist_ok=True)
         lock = FolderLock(out).acquire()
@@ -742,10 +777,31 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
             say(why)
         rows = mark_folds(rows, param)
         write_table(out, param, rows)
+        if modes and stable:
+            write_json_atomic(out / "bifurcations.json",
+                              {"param": param, "bifurcations": bifurcations(rows, param)})
         draw(out, param, rows, meridians)
     finally:
         lock.release()
     return rows
+
+
+def _checker(stable: bool, modes: int):
+    """A point's stability: the m = 0 block's :data:`EIGENVALUES` lowest, and with ``modes``
+    the lowest of each block m = 1 … modes (:func:`fem_ade.stability.axisymmetric`)."""
+    if not stable:
+        return lambda be: None
+    from .stability import axisymmetric
+
+    def check(be):
+        out = axisymmetric(be, (0,), EIGENVALUES)
+        if modes:
+            more = axisymmetric(be, range(1, modes + 1), 1)
+            out.modes.update(more.modes)
+            out.unstable.update(more.unstable)
+            out.unstable_3d += more.unstable_3d
+        return out
+    return check
 
 
 def check_follow(scene, *, param: str, start: float, stop: float, step: float,
@@ -884,12 +940,12 @@ def _timed_row(be, param: str, cont, newton: int, t0: float, check) -> dict:
     (``check``), its description, and its time — ``seconds`` all of it, ``newton_s`` and
     ``stability_s`` its parts (the latter None without stability)."""
     t1 = time.perf_counter()
-    eigenvalues = check(be)
+    stab = check(be)
     t2 = time.perf_counter()
-    row = describe_point(be, param, cont, newton, 0.0, eigenvalues)
+    row = describe_point(be, param, cont, newton, 0.0, stab)
     row["seconds"] = round(time.perf_counter() - t0, 2)
     row["newton_s"] = round(t1 - t0, 2)
-    row["stability_s"] = None if eigenvalues is None else round(t2 - t1, 2)
+    row["stability_s"] = None if stab is None else round(t2 - t1, 2)
     return row
 
 
@@ -1003,6 +1059,8 @@ def same_branch(first, label) -> bool:
 def _line(param, row) -> str:
     stable = ("stability not computed" if row["unstable"] is None else
               f"unstable {row['unstable']} (lowest eigenvalue {row['lowest_eigenvalue']:.3g})")
+    if row.get("unstable_3d") is not None:
+        stable += f", in 3D {row['unstable_3d']}"
     return (f"  {param} = {row[param]:.6g}: e = {row['e']:.8g}, {row['label']}, {stable}, "
             f"Newton {row['newton']}, {row['seconds']} s")
 
@@ -1027,6 +1085,10 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--order", type=int, help="element order (default 8)")
     ap.add_argument("--folds", type=int, help="end the branch past this many folds (0: at "
                     "the first; default: go on past folds)")
+    ap.add_argument("--modes", type=int, default=DEFAULT_MODES,
+                    help="azimuthal modes m = 0 ... M at each point: the lowest eigenvalue "
+                    f"of each, the 3D unstable count, the bifurcations (default "
+                    f"{DEFAULT_MODES}; 0: axisymmetric perturbations only)")
     ap.add_argument("--no-stability", dest="stable", action="store_false",
                     help="no stability at the points (their unstable count blank): at small "
                     "eps most of a point's time")
@@ -1070,7 +1132,7 @@ def main(argv=None) -> int:
         options = {} if args.order is None else {"order": args.order}
         follow(scene, param=args.param, start=args.start, stop=args.stop, step=args.step,
                out=args.out, backend_options=options, n=args.n, quiet=args.quiet,
-               folds=args.folds, stable=args.stable, branch=branch)
+               folds=args.folds, stable=args.stable, branch=branch, modes=args.modes)
     except ModelError as err:
         print(f"fem_ade.branch: error: {err}", file=sys.stderr)
         return 2

@@ -331,9 +331,10 @@ def resume(out: str | Path, *, steps: int | None = None, quiet: bool = True,
     return (result, scene, config) if with_config else result
 
 
-def _check_resumable(out: Path, steps: int | None):
-    """(scene, config, state, loop state) of a run folder to resume, every piece checked as
-    a new run's would be; ModelError (one line) for the first that is not right."""
+def read_run(out: str | Path, doing: str = "read") -> tuple[Scene, RunConfig]:
+    """(scene, configuration) of a run folder's run.json; ModelError (one line, "cannot
+    DOING OUT: ...") if it is missing or not a run's."""
+    out = Path(out)
     try:
         data = read_json(out / "run.json")
         if not isinstance(data, dict) or "scene" not in data:
@@ -341,9 +342,16 @@ def _check_resumable(out: Path, steps: int | None):
         scene = scene_from_mapping(data["scene"], where=str(out / "run.json"))
         config = RunConfig.from_mapping({k: v for k, v in data.items() if k != "scene"})
     except ModelError as err:
-        raise ModelError(f"cannot resume {out}: {err}") from None
+        raise ModelError(f"cannot {doing} {out}: {err}") from None
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
-        raise ModelError(f"cannot resume {out}: run.json is not a run's ({err!r})") from None
+        raise ModelError(f"cannot {doing} {out}: run.json is not a run's ({err!r})") from None
+    return scene, config
+
+
+def _check_resumable(out: Path, steps: int | None):
+    """(scene, config, state, loop state) of a run folder to resume, every piece checked as
+    a new run's would be; ModelError (one line) for the first that is not right."""
+    scene, config = read_run(out, "resume")
     try:
         config.check(scene, allow_underresolved=True)
         if steps is not None:  # --steps N: continue to step N (checked as a new run's)
@@ -403,16 +411,7 @@ def planned_identity(scene, options: dict) -> dict:
 def folder_identity(out: str | Path) -> dict:
     """The :func:`run_identity` of the run a folder's run.json records; ModelError (one
     line) if it has none or it is not a run's."""
-    out = Path(out)
-    try:
-        data = read_json(out / "run.json")
-        scene = scene_from_mapping(data["scene"], where=str(out / "run.json"))
-        config = RunConfig.from_mapping({k: v for k, v in data.items() if k != "scene"})
-    except ModelError as err:
-        raise ModelError(f"{out}: {err}") from None
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
-        raise ModelError(f"{out}: run.json is not a run's ({err!r})") from None
-    return run_identity(scene, config)
+    return run_identity(*read_run(out))
 
 
 def _identity_difference(stored: dict, current: dict, where: str = "") -> str | None:

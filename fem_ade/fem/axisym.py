@@ -498,3 +498,37 @@ class AxisymmetricFEMBackend(FEMBackend):
                           [list(zone["band"][0]), list(zone["band"][1])]},
         })
         return info
+
+
+class SavedMeshBackend(AxisymmetricFEMBackend):
+    """An axisymmetric backend on the very mesh a saved field was computed on — its
+    ``fields`` (:meth:`AxisymmetricFEMBackend.fields`: the cell vertices, the order, the fine
+    zone, the axis) — at that field: what reads a branch point's or a run's end exactly
+    (its steady state on its own discretization). ``params`` the model's; ``n`` the cells per
+    L of the fine zone."""
+
+    def __init__(self, params, fields: dict, *, n: int, constraints: str = "exact",
+                 scheme: str = "stabilized"):
+        from ..initial import Sphere
+
+        self._saved = {k: np.asarray(v) for k, v in fields.items()}
+        r, z = self._saved["r_vertices"], self._saved["z_vertices"]
+        ax, ay = (float(x) for x in self._saved["axis"])
+        R0 = math.sqrt(params.beta / (4.0 * math.pi))
+        scene = Scene("saved", params, 1e-6,
+                      Sphere(centre=(ax, ay, 0.5 * (z[0] + z[-1])), radius=R0))
+        super().__init__(scene, n=n, order=int(self._saved["order"]), mesh="graded",
+                         domain=f"{float(r[-1])!r},{float(z[0])!r},{float(z[-1])!r}", scheme=scheme,
+                         constraints=constraints)
+        phi = np.asarray(self._saved["phi"], dtype=float).ravel()
+        if phi.size != self.space.n_dofs:
+            raise ModelError(f"the saved field has {phi.size} nodes, its mesh {self.space.n_dofs}")
+        self._set(phi, None)
+
+    def _make_mesh(self, n: int, mesh):
+        f = self._saved
+        ra, rb, za, zb = (float(x) for x in f["fine_zone"])
+        L = self.params.L
+        return RZMesh("graded", np.asarray(f["r_vertices"], dtype=float),
+                      np.asarray(f["z_vertices"], dtype=float), ((ra, rb), (za, zb)), L / n, L,
+                      DEFAULT_MARGIN)

@@ -81,10 +81,18 @@ class NewtonResult:
     message: str = ""
 
 
-class NewtonSystem:
-    """The pieces of the bordered Newton system on an FEM backend (module docstring)."""
+#: the linear solvers of the bordered Newton system: ``direct`` (a sparse LU of the mixed
+#: Hessian with its borders, :mod:`fem_ade.fem.direct`: 2D tensor spaces), ``minres``
+#: (preconditioned by the bulk Hessian's fast diagonalization: any tensor space), ``auto``
+#: (direct where it applies)
+LINEAR_SOLVERS = ("auto", "direct", "minres")
 
-    def __init__(self, be):
+
+class NewtonSystem:
+    """The pieces of the bordered Newton system on an FEM backend (module docstring);
+    ``linear`` one of :data:`LINEAR_SOLVERS`."""
+
+    def __init__(self, be, linear: str = "auto"):
         if getattr(be, "exact", False) is not True:
             raise ModelError("Newton's method solves for steady states with exact constraints "
                              "(--constraints exact)")
@@ -100,6 +108,48 @@ class NewtonSystem:
         P = StepMatrix(4.0 * p.kappa / p.eps**3, 4.0 * p.kappa / p.eps, p.kappa * p.eps)
         self.P_inverse_symbol = basis.inverse(P)
         self.translations = self._translations()
+        if linear not in LINEAR_SOLVERS:
+            raise ModelError(f"the Newton system's solver must be one of "
+                             f"{', '.join(LINEAR_SOLVERS)}, got {linear!r}")
+        planar = space.dim == 2 and not any(getattr(a, "periodic", False) for a in space.axes)
+        if linear == "direct" and not planar:
+            raise ModelError("the direct solver factors the Hessian of a 2D space with natural "
+                             "edges (the axisymmetric geometry); use minres")
+        self.direct = planar if linear == "auto" else linear == "direct"
+        self._K = None
+
+    @property
+    def K_assembled(self):
+        """K as a sparse matrix (the direct solver's), once."""
+        if self._K is None:
+            self._K = self.space.assembled_stiffness()
+        return self._K
+
+    def bulk(self) -> tuple[float, float, float]:
+        """(a, c, κε) of P = aW + cK + κε KW⁻¹K, the Hessian of E_h in the bulk phases."""
+        p = self.params
+        return 4.0 * p.kappa / p.eps**3, 4.0 * p.kappa / p.eps, p.kappa * p.eps
+
+    def factor(self, lin: Linearization, sigma: float = 0.0, C=None):
+        """The bordered Hessian of ``lin`` less σP, factored (:class:`fem_ade.fem.direct.
+        Bordered` over a :class:`~fem_ade.fem.direct.HessianFactor`): its rank-one terms and
+        the constraints ``C`` (default: ``lin.C``) as borders. Kept on ``lin`` for σ = 0
+        and the default C (a Newton step's two right sides share it)."""
+        from .direct import Bordered, HessianFactor, node_order
+
+        keep = sigma == 0.0 and C is None
+        if keep and lin.bordered is not None:
+            return lin.bordered
+        a, c, ke = self.bulk()
+        co = self.step.hessian_coefficients(lin.phi, lin.mu, lin.Kphi, lin.lam[0], lin.lam[1])
+        F = HessianFactor(self.K_assembled, self.w, ke, co,
+                          node_order(self.space.shape, self.space.order), sigma=sigma, P=(a, c))
+        bordered = Bordered(F.solve, [b for _, b in co["rank_one"]],
+                            [s for s, _ in co["rank_one"]], lin.C if C is None else C)
+        bordered.factor = F
+        if keep:
+            lin.bordered = bordered
+        return bordered
 
     @property
     def params(self):
@@ -186,6 +236,8 @@ class Linearization:
     lam: np.ndarray
     grad: np.ndarray
     violation: np.ndarray
+    #: the factored bordered Hessian (the direct solver's), made on first use
+    bordered: object = None
 
 
 def linearize(sys_: NewtonSystem, phi: np.ndarray) -> Linearization:
@@ -200,8 +252,18 @@ def linearize(sys_: NewtonSystem, phi: np.ndarray) -> Linearization:
 
 def kkt_solve(sys_: NewtonSystem, lin: Linearization, rhs: np.ndarray,
               inner_tol: float = 1e-8) -> tuple[np.ndarray, int]:
-    """x with [[H_L, C], [Cᵀ, 0]] x = rhs (length N + len(C)) by MINRES, preconditioned by
-    diag(P, CᵀP⁻¹C) (module docstring); (x, MINRES iterations)."""
+    """x with [[H_L, C], [Cᵀ, 0]] x = rhs (length N + len(C); or a stack of right sides,
+    (N + len(C), k)): by the factored Hessian (``sys_.direct``: the same factorization for
+    every right side), or by MINRES, preconditioned by diag(P, CᵀP⁻¹C) (module docstring);
+    (x, MINRES iterations: 0 for the direct solve)."""
+    rhs = np.asarray(rhs, dtype=float)
+    N = lin.phi.size
+    if sys_.direct:
+        x, y = sys_.factor(lin).solve(rhs[:N], rhs[N:])
+        return np.concatenate([x, y], axis=0), 0
+    if rhs.ndim == 2:
+        out = [kkt_solve(sys_, lin, rhs[:, j], inner_tol) for j in range(rhs.shape[1])]
+        return np.column_stack([x for x, _ in out]), sum(its for _, its in out)
     step, C = sys_.step, lin.C
     N = lin.phi.size
     PC = [sys_.P_inverse(c) for c in C]
@@ -276,7 +338,7 @@ def minres(A, b: np.ndarray, M, *, rtol: float, maxiter: int) -> tuple[np.ndarra
 
 def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
                  max_halvings: int = 10, inner_tol: float = 1e-8,
-                 quiet: bool = True) -> NewtonResult:
+                 quiet: bool = True, linear: str = "auto") -> NewtonResult:
     """Newton's method from the backend's current state to a steady state with V = α and
     A = β exactly (module docstring). Each iteration: the bordered system by MINRES (its
     preconditioned residual below ``inner_tol``), then the step (reversed where it climbs,
@@ -286,7 +348,7 @@ def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
     is below ``tol``·|E|. The backend is left at the last state reached (its field, with
     φⁿ⁻¹ cleared); :class:`NewtonResult` says whether it converged."""
     t0 = time.perf_counter()
-    sys_ = NewtonSystem(be)
+    sys_ = NewtonSystem(be, linear)
     step = sys_.step
     phi = sys_.restore(be.phi.copy())
     if phi is None:

@@ -136,6 +136,19 @@ class MixedStep:
         G″·(∇ΔA·v)∇ΔA included; the penalties' terms where their effects are on."""
         p = self.params
         mu_v = self.space.laplacian(v)
+        a, c = self.hessian_parts(phi, mu, Kphi, v, mu_v)
+        Hv = self.K @ (a - (2.0 * p.kappa / p.eps) * v + (p.kappa * p.eps) * mu_v) \
+            + self.w * c
+        for sigma, b in self.rank_one(phi, mu, Kphi, *self.values(phi, mu, Kphi)):
+            Hv = Hv + sigma * _dot(b, v) * b  # the functionals' slopes
+        return Hv
+
+    def hessian_parts(self, phi, mu, Kphi, v, mu_v):
+        """(a′, c′): the nodal products of the linearized explicit terms along (v, μ_v) —
+        ∇²E_h v = K(a′ − (2κ/ε)v + κε μ_v) + W c′ + the rank-one terms. Pointwise and linear
+        in (v, μ_v), so evaluated at v = 1, μ_v = 0 and at v = 0, μ_v = 1 they are the
+        coefficients of :meth:`hessian_coefficients`."""
+        p = self.params
         A, dA, V = self.values(phi, mu, Kphi)
         a, c = forms.bending_explicit_linear(phi, mu, v, mu_v, kappa=p.kappa, eps=p.eps,
                                              C=p.C_eff)
@@ -149,11 +162,35 @@ class MixedStep:
         if V is not None:
             c = c + p.volume_slope(V) * forms.volume_gradient_linear(phi, v,
                                                                    p.localized_volume)
-        Hv = self.K @ (a - (2.0 * p.kappa / p.eps) * v + (p.kappa * p.eps) * mu_v) \
-            + self.w * c
-        for sigma, b in self.rank_one(phi, mu, Kphi, A, dA, V):  # the functionals' slopes
-            Hv = Hv + sigma * _dot(b, v) * b
-        return Hv
+        return a, c
+
+    def hessian_coefficients(self, phi, mu, Kphi, lam_V: float = 0.0,
+                             lam_A: float = 0.0) -> dict:
+        """The Hessian of the Lagrangian E_h + λ_V V_h + λ_A A_h at φ as coefficients, for
+        assembling it (:mod:`fem_ade.fem.direct`):
+
+            H = κε K W⁻¹K + K diag(α) + diag(α) K + W diag(γ) + c₀ K + Σ σᵢ bᵢbᵢᵀ,
+
+        ``alpha`` (α: a′'s coefficient of v, which equals c′'s of μ_v — the symmetry of the
+        Hessian, checked here), ``gamma`` (γ: c′'s coefficient of v), ``c0`` (−2κ/ε and the
+        area terms' constant multiples of K) and ``rank_one`` [(σ, b)]."""
+        p = self.params
+        ones, zeros = np.ones_like(phi), np.zeros_like(phi)
+        a1, c1 = self.hessian_parts(phi, mu, Kphi, ones, zeros)
+        a2, c2 = self.hessian_parts(phi, mu, Kphi, zeros, ones)
+        a1, c1, a2, c2 = (np.broadcast_to(x, phi.shape).astype(float) for x in (a1, c1, a2, c2))
+        # a′ = s v + α v (s: the constant multiple of v, the area terms'), c′ = γ v + α μ_v
+        s = a1 - c2
+        if np.any(a2 != 0.0) or np.ptp(s) > 1e-12 * max(1.0, float(np.max(np.abs(a1)))):
+            raise ArithmeticError("the Hessian's parts are not of the assumed form")
+        c0 = float(np.mean(s)) - 2.0 * p.kappa / p.eps
+        gamma = c1 + lam_V * forms.volume_gradient_linear(phi, ones, p.localized_volume)
+        if lam_A:
+            sa, ca = forms.area_gradient_linear(phi, ones, p.eps)
+            c0 += lam_A * sa
+            gamma = gamma + lam_A * ca
+        return {"alpha": c2, "gamma": gamma, "c0": c0,
+                "rank_one": self.rank_one(phi, mu, Kphi, *self.values(phi, mu, Kphi))}
 
     def constraint_hessian_vector(self, phi, Kphi, v, lam_V, lam_A) -> np.ndarray:
         """(λ_V ∇²V_h + λ_A ∇²A_h) v: the exact constraints' part of the Lagrangian's
