@@ -65,8 +65,8 @@ import numpy as np
 
 from .model import ModelError
 from .threads import limit_threads
+from .vesicle import PARAMETERS, get_parameter, set_parameter  # noqa: F401 (the branch's)
 
-PARAMETERS = ("v", "da0", "kbar", "C")
 #: Newton iterations before a step is taken again at half the arclength; at most this many,
 #: and the next step is half as long again. Measured with the quadratic predictor: 4-5 at
 #: ε = 0.02 (the prolate, v 0.95 -> 0.85), 5-8 at ε = 0.01 (the pear at v = 0.8, Δa₀ 1.526
@@ -100,29 +100,6 @@ COLUMNS = ("point", "e", "E", "W", "G", "V", "A", "dA", "v_surface", "da_surface
 # ---------------------------------------------------------------------------------------------
 # the parameter
 # ---------------------------------------------------------------------------------------------
-def get_parameter(params, name: str) -> float:
-    R0 = math.sqrt(params.beta / (4.0 * math.pi))
-    if name == "v":
-        return params.alpha / (4.0 / 3.0 * math.pi * R0**3)
-    if name == "da0":
-        return params.delta_A0 / (8.0 * math.pi * params.D * R0)
-    if name == "kbar":
-        return params.kappa_bar / params.kappa
-    return params.C
-
-
-def set_parameter(params, name: str, value: float):
-    """The parameters with ``name`` at ``value`` (R₀ = √(β/4π) kept)."""
-    R0 = math.sqrt(params.beta / (4.0 * math.pi))
-    if name == "v":
-        return params.with_(alpha=4.0 / 3.0 * math.pi * R0**3 * value)
-    if name == "da0":
-        return params.with_(delta_A0=8.0 * math.pi * params.D * R0 * value)
-    if name == "kbar":
-        return params.with_(kappa_bar=value * params.kappa)
-    return params.with_(C=value)
-
-
 def check_parameter(params, name: str) -> None:
     if name not in PARAMETERS:
         raise ModelError(f"--param must be one of {', '.join(PARAMETERS)}, got {name!r}")
@@ -720,15 +697,13 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
     azimuthal modes m = 1 … modes too (docs/model.md §13): each point's lowest eigenvalue
     per mode, its 3D unstable count, and the bifurcations where a mode's lowest eigenvalue
     crosses zero (bifurcations.json, branch.png)."""
-    if isinstance(modes, bool) or not isinstance(modes, int) or not 0 <= modes <= MAX_MODES:
-        raise ModelError(f"--modes must be a whole number from 0 to {MAX_MODES}, got {modes!r}")
     from .backend import make_backend
     from .lock import FolderLock
-    from .output import write_json_atomic
 
     say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
     check_follow(scene, param=param, start=start, stop=stop, step=step,
-                 backend_options=backend_options, n=n, folds=folds, branch=branch)
+                 backend_options=backend_options, n=n, folds=folds, branch=branch,
+                 modes=modes)
     options = {"geometry": "axisymmetric", **(backend_options or {})}
     out = _check_out(out)
     scene, config, identity = _branch_setup(scene, param, start, stop, step, n, options)
@@ -775,14 +750,24 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
             ds = row["ds_next"]
         if why:
             say(why)
-        rows = mark_folds(rows, param)
-        write_table(out, param, rows)
-        if modes and stable:
-            write_json_atomic(out / "bifurcations.json",
-                              {"param": param, "bifurcations": bifurcations(rows, param)})
-        draw(out, param, rows, meridians)
+        rows = _finish(out, param, rows, meridians, with_modes=bool(modes and stable))
     finally:
         lock.release()
+    return rows
+
+
+def _finish(out: Path, param: str, rows: list[dict], meridians: list,
+            with_modes: bool) -> list[dict]:
+    """The branch's table with its folds, its bifurcations (with the azimuthal modes) and
+    its pictures; its rows."""
+    from .output import write_json_atomic
+
+    rows = mark_folds(rows, param)
+    write_table(out, param, rows)
+    if with_modes:
+        write_json_atomic(out / "bifurcations.json",
+                          {"param": param, "bifurcations": bifurcations(rows, param)})
+    draw(out, param, rows, meridians)
     return rows
 
 
@@ -806,7 +791,8 @@ def _checker(stable: bool, modes: int):
 
 def check_follow(scene, *, param: str, start: float, stop: float, step: float,
                  backend_options: dict | None = None, n: int | None = None,
-                 folds: int | None = None, branch: str | None = None) -> None:
+                 folds: int | None = None, branch: str | None = None,
+                 modes: int = 0) -> None:
     """What :func:`follow` checks before it makes anything, for a sweep to check its branch
     points before they run (ModelError, one line): the parameter and the ends, the branch's
     name, the geometry, and the run's configuration (n, order, the backend's options, the
@@ -821,6 +807,8 @@ def check_follow(scene, *, param: str, start: float, stop: float, step: float,
     check_branch(scene.params, param, start, stop, step, folds)
     if branch is not None:
         check_branch_name(branch)
+    if isinstance(modes, bool) or not isinstance(modes, int) or not 0 <= modes <= MAX_MODES:
+        raise ModelError(f"--modes must be a whole number from 0 to {MAX_MODES}, got {modes!r}")
     _branch_setup(scene, param, start, stop, step, n, options)
 
 

@@ -235,9 +235,9 @@ def _read_fields(path: Path) -> dict:
 
 
 def _branch_point(folder: Path, branch: Path):
-    from .branch import set_parameter
     from .fem.axisym import SavedMeshBackend
     from .model import Params
+    from .vesicle import set_parameter
 
     try:
         identity = json.loads(branch.read_text())

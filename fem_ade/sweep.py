@@ -427,7 +427,7 @@ def _listed(points, base: str, seeds: list, axes: dict, branch: dict | None = No
 
 #: a [branch] table's keys (their types) and the [run] options a branch sweep takes
 BRANCH_KEYS = {"param": str, "from": float, "to": float, "step": float, "folds": int,
-               "stability": bool}
+               "stability": bool, "modes": int}
 BRANCH_RUN_KEYS = ("n", "backend_options")
 
 
@@ -552,6 +552,7 @@ def check_sweep(sweep: Sweep) -> None:
                 check_follow(point.scene(sharp_seed=False), param=b["param"],
                              start=b["from"], stop=b["to"], step=b["step"], folds=b["folds"],
                              n=run.get("n"), backend_options=options,
+                             modes=b.get("modes", 0),
                              branch=point.seed if point.base == "vesicle" else None)
             except (ModelError, TypeError, KeyError) as err:
                 raise ModelError(f"point {point.name}: {err}") from None
@@ -666,14 +667,18 @@ def _follow(point: Point, folder: Path) -> None:
     rows = follow(point.scene(), param=b["param"], start=b["from"], stop=b["to"],
                   step=b["step"], out=folder, n=point.run.get("n"),
                   backend_options=point.run.get("backend_options"), quiet=True,
-                  folds=b["folds"], stable=b.get("stability", True))
+                  folds=b["folds"], stable=b.get("stability", True),
+                  modes=b.get("modes", 0))
     # (no branch= check of the first point's shape: a sweep follows what its seed relaxes
     # to, and its table's label says what that is — studies/branches.py sets aside a seed
     # that is not on its branch, with the reason, in its report)
     last = rows[-1]
+    forks = folder / "bifurcations.json"
+    forks = json.loads(forks.read_text())["bifurcations"] if forks.is_file() else []
     write_json_atomic(folder / "summary.json", {
         "status": Status.COMPLETED, "branch": b, "points": len(rows), "end": last[b["param"]],
         "folds": [r["fold"] for r in rows if r.get("fold")], "last": last,
+        **({"bifurcations": forks} if b.get("modes") else {}),
         "seconds": round(time.perf_counter() - t0, 1)}, make_folder=True)
 
 

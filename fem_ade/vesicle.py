@@ -245,3 +245,33 @@ def _parts(ves: Vesicle, r, z, R0: float, origin: str) -> dict:
     return {"name": "vesicle", "params": params, "dt": DT_PER_EPS3 * ves.eps**3, "ic": ic,
             "n": n, "figure": "vesicle family", "shape": ves.branch,
             "description": f"vesicle: {text}; R0 = {R0:.4g}; seeded from {origin}"}
+
+
+# ---------------------------------------------------------------------------------------------
+# the parameters a branch follows (fem_ade.branch, fem_ade.stability)
+# ---------------------------------------------------------------------------------------------
+#: the reduced parameters of the family a branch can follow
+PARAMETERS = ("v", "da0", "kbar", "C")
+
+
+def get_parameter(params, name: str) -> float:
+    R0 = math.sqrt(params.beta / (4.0 * math.pi))
+    if name == "v":
+        return params.alpha / (4.0 / 3.0 * math.pi * R0**3)
+    if name == "da0":
+        return params.delta_A0 / (8.0 * math.pi * params.D * R0)
+    if name == "kbar":
+        return params.kappa_bar / params.kappa
+    return params.C
+
+
+def set_parameter(params, name: str, value: float):
+    """The parameters with ``name`` at ``value`` (R₀ = √(β/4π) kept)."""
+    R0 = math.sqrt(params.beta / (4.0 * math.pi))
+    if name == "v":
+        return params.with_(alpha=4.0 / 3.0 * math.pi * R0**3 * value)
+    if name == "da0":
+        return params.with_(delta_A0=8.0 * math.pi * params.D * R0 * value)
+    if name == "kbar":
+        return params.with_(kappa_bar=value * params.kappa)
+    return params.with_(C=value)

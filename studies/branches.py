@@ -192,8 +192,9 @@ def _crossings_table(payload: dict) -> list[str]:
              "`fem_ade.branch` (axisymmetric, order 8, 2.5 nodes per ε, Newton on every "
              "point), at one R₀ for both; the transition is where their e = (W + G)/W_sphere "
              "are equal. ε → 0: Richardson with p = 2 over the two ε.", "",
-             "**Made with older branch code**: these tables are the first run's (b732ffe … ce4559e), "
-             "before the continuation's predictor and its stability without the translation "
+             "**Made with older branch code**: these tables are the first run's (b732ffe … "
+             "ce4559e), before the continuation's predictor and its stability without the "
+             "translation "
              "mode changed; the notes below say what moved when the branches were followed "
              "again at the new code.", "",
              "| transition | R₀ | " + " | ".join(f"ε = {e:g} (ε/R₀)" for e in eps_list)

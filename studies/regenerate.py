@@ -39,6 +39,8 @@ STEPS = (
     ("ade_plane", ["studies/ade_plane.py", "--out", RESULTS]),
     ("branches", ["studies/branches.py", "--out", RESULTS]),
     ("ade_branches", ["studies/ade_branches.py", "--out", RESULTS]),
+    ("azimuthal", ["studies/azimuthal.py", "--out", RESULTS]),
+    ("solver_bench", ["studies/solver_bench.py", "--out", RESULTS]),
     ("nonaxisymmetric", ["studies/nonaxisymmetric.py", "--out", RESULTS, "--eps", "0.02"]),
     ("sweep_scaling", ["studies/sweep_scaling.py", "--out", RESULTS]),
     ("phase_diagram", ["studies/phase_diagram.py", "--out", RESULTS]),
@@ -60,6 +62,7 @@ SWEEPS = {"gallery": ("built from its plan: studies/gallery.py point_spec, kick_
           "phase_diagram": ("studies/sweeps/minimal.toml", "studies/sweeps/ade.toml"),
           "branches": ("studies/sweeps/branches.toml",),
           "ade_branches": ("built from its lines: studies/ade_branches.py line_point",),
+          "azimuthal": ("built from its branches: studies/azimuthal.py plan",),
           "constraints_study": ("built from its Δt trials: studies/constraints_study.py "
                                 "case_point",)}
 
@@ -73,7 +76,9 @@ MEASUREMENTS = {"convergence": "errors and times of each resolution, in one proc
                 "scaling": "MPI ranks' timings under mpirun",
                 "hard_cases": "each case's outcome and wall time, in memory in one process",
                 "readme_figure": "one run and its picture",
-                "sweep_scaling": "a sweep's wall time on 1 and 2 workers"}
+                "sweep_scaling": "a sweep's wall time on 1 and 2 workers",
+                "solver_bench": "one point's Newton and stability by each solver, in one "
+                                "process"}
 
 
 def main(argv=None) -> dict:

@@ -350,6 +350,29 @@ def check_phase_diagram(result, out):
     assert (out / "phase_diagram" / "ade-quick" / "phase-diagram.png").is_file()
 
 
+def check_azimuthal(result, out):
+    """The prolate and the oblate at ε = 0.04 with modes m ≤ 3: the prolate stable in 3D
+    all along, the oblate unstable in m = 2 at v = 0.85 (two 3D directions) and stable past
+    its m = 2 bifurcation near v = 0.80; the report and picture written."""
+    prolate, oblate = result["branches"]
+    assert prolate["unstable_3d_at_start"] == 0 and not prolate["bifurcations"]
+    assert oblate["unstable_3d_at_start"] == 2
+    assert [b["m"] for b in oblate["bifurcations"]] == [2]
+    assert 0.78 < oblate["bifurcations"][0]["v"] < 0.815
+    text = (out / "azimuthal_quick.md").read_text()
+    assert "m = 2 at" in text and (out / "azimuthal_quick.png").is_file()
+
+
+def check_solver_bench(result, out):
+    """At ε = 0.04: one continuation point by both solvers to the same energy, the m = 0
+    block by both eigen-solvers to 1e-8, every time positive."""
+    r = result["0.04"]
+    assert r["E_direct"] == pytest.approx(r["E_minres"], rel=1e-9)
+    assert r["eigenvalues_agree"] < 1e-8
+    assert all(r[k] > 0 for k in ("newton_direct_s", "stability_m0_s", "stability_m8_s"))
+    assert (out / "solver_bench_quick.json").is_file()
+
+
 ARGS = {"readme_figure": ["--steps", "2", "--n", "24"]}
 #: where each study writes by default (under the current directory)
 DEFAULT_OUT = {"gallery": "runs/gallery", "readme_figure": "runs/readme"}

@@ -1,0 +1,259 @@
+"""Is it stable in 3D? The minimal model's axisymmetric branches, their stability in every
+azimuthal mode m = 0 … 8, and where non-axisymmetric shapes are born (issue 43).
+
+Each branch — the prolate (R₀ = 0.17, from v = 0.95), the oblate (R₀ = 0.25, from 0.95) and
+the stomatocyte (R₀ = 0.25, from 0.62) — is followed down in v by ``fem_ade.branch`` with
+``modes = 8`` at each ε (a branch sweep of listed points, :mod:`fem_ade.sweep`, two Dask
+workers, resumable): at every point the lowest eigenvalue of each block m and the count of
+unstable 3D directions (m ≥ 1 counted twice: cos mθ and sin mθ), and the bifurcations where
+a block's count changes (``bifurcations.json``: m ≥ 1 a non-axisymmetric branch is born;
+m = 0 away from a fold an axisymmetric symmetry breaking). A bifurcation found at two ε is
+extrapolated to ε → 0 by Richardson with p = 2 assumed (the order of the branches' energies,
+``sharp_limit.md``; with three ε the order is observed and said).
+
+Writes ``OUT/azimuthal.md`` (what is stable in 3D along each branch and where that changes, at
+each ε; the extrapolations; the hand-written notes of ``OUT/azimuthal_notes.md``),
+``OUT/azimuthal.json`` and ``OUT/azimuthal.png`` (e against v, stable in 3D solid, unstable
+dashed, each bifurcation marked with its m); the branch folders in
+``OUT/azimuthal/points/NAME`` (their ``points/`` are not committed). ``--report-only``
+rebuilds the report from the folders; ``--eps`` chooses the ε (default 0.02 0.01).
+
+    python studies/azimuthal.py --out studies/results
+    python studies/azimuthal.py --quick           # ε = 0.04, short stretches: the code
+
+One thread per worker: ``OPENBLAS_NUM_THREADS=1``, ``FEM_ADE_FFT_WORKERS=1`` unless set.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+OUT = Path("runs") / "studies"
+#: the branches: (seed, R₀, from, to); the step in v; the modes
+BRANCHES = [("prolate", 0.17, 0.95, 0.58), ("oblate", 0.25, 0.95, 0.52),
+            ("stomatocyte", 0.25, 0.62, 0.50)]
+QUICK = [("prolate", 0.2, 0.85, 0.8), ("oblate", 0.25, 0.85, 0.78)]
+STEP, MODES = 0.01, 8
+EPS, QUICK_EPS = (0.02, 0.01), (0.04,)
+#: the sharp membrane's transitions of the lowest branch (sharp_limit.md), for the report
+SHARP = {"prolate → oblate": 0.6511, "oblate → stomatocyte": 0.5912}
+
+
+def name_of(seed: str, R0: float, eps: float) -> str:
+    return f"{seed}-R0={R0:g}-eps={eps:g}"
+
+
+def plan(eps_list, branches, step: float = STEP, modes: int = MODES) -> list[dict]:
+    """The sweep's listed branch points."""
+    return [{"name": name_of(seed, R0, eps), "seed": seed, "scene": {"eps": eps, "R0": R0},
+             "branch": {"param": "v", "from": start, "to": stop, "step": step,
+                        "folds": None, "modes": modes}}
+            for eps in eps_list for seed, R0, start, stop in branches]
+
+
+def rows_of(root: Path, name: str) -> tuple[list[dict], list[dict]]:
+    """A finished branch's rows (branch.csv) and bifurcations, or ([], [])."""
+    from fem_ade.branch import read_table
+    from fem_ade.jobs import read_summary
+    from fem_ade.status import Status
+
+    folder = root / "points" / name
+    summary = read_summary(folder)
+    if summary is None or summary.get("status") != Status.COMPLETED:
+        return [], []
+    forks = folder / "bifurcations.json"
+    found = json.loads(forks.read_text())["bifurcations"] if forks.is_file() else []
+    return read_table(folder), found
+
+
+def stable_stretches(rows: list[dict]) -> list[list[float]]:
+    """The stretches of v (first, last point) where a branch is stable in 3D."""
+    out, current = [], None
+    for r in rows:
+        ok = r.get("unstable_3d") == 0
+        if ok and current is None:
+            current = [r["v"], r["v"]]
+        elif ok:
+            current[1] = r["v"]
+        elif current is not None:
+            out.append(current)
+            current = None
+    if current is not None:
+        out.append(current)
+    return out
+
+
+def summarize(root: Path, eps_list, branches, modes: int = MODES) -> dict:
+    """Per branch and ε: its points, where it ended, its folds, its stretches stable in 3D,
+    its bifurcations; per (branch, m, k-th of that m) the bifurcations' v at each ε and their
+    extrapolation."""
+    from sharp_limit import extrapolate
+
+    table, curves = [], {}
+    for seed, R0, start, stop in branches:
+        for eps in eps_list:
+            rows, forks = rows_of(root, name_of(seed, R0, eps))
+            curves[(seed, eps)] = [(r["v"], r["e"], r.get("unstable_3d")) for r in rows]
+            table.append({
+                "branch": seed, "R0": R0, "eps": eps, "points": len(rows),
+                "from": start, "to": stop,
+                "end": rows[-1]["v"] if rows else None,
+                "end_label": rows[-1]["label"] if rows else None,
+                "first_label": rows[0]["label"] if rows else None,
+                "folds": [float(r["fold"]) for r in rows if r.get("fold") not in (None, "")],
+                "stable_3d": stable_stretches(rows),
+                "unstable_3d_at_start": rows[0].get("unstable_3d") if rows else None,
+                "bifurcations": [{"m": b["m"], "v": b["v"], "unstable": b["unstable"],
+                                  "located": b["located"]} for b in forks],
+                "seconds": round(sum(float(r.get("seconds") or 0.0) for r in rows), 1)})
+    extrapolated = []
+    for seed, _, _, _ in branches:
+        series = {}
+        for row in (t for t in table if t["branch"] == seed):
+            seen = {}
+            for b in row["bifurcations"]:
+                k = seen.get(b["m"], 0)
+                seen[b["m"]] = k + 1
+                series.setdefault((b["m"], k), {})[row["eps"]] = b["v"]
+        for (m, k), at in sorted(series.items()):
+            entry = {"branch": seed, "m": m, "k": k, "at": {f"{e:g}": v for e, v in at.items()},
+                     "extrapolated": None, "order": None}
+            if len(at) >= 2:
+                eps_sorted = sorted(at)
+                e0, p, observed = extrapolate(eps_sorted, [at[e] for e in eps_sorted])
+                entry.update(extrapolated=e0, order=p if observed else None)
+            extrapolated.append(entry)
+    return {"eps": list(eps_list), "modes": modes, "branches": table,
+            "bifurcations": extrapolated}, curves
+
+
+def draw(path: Path, curves: dict, result: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fem_ade.render import save_figure
+
+    seeds = list(dict.fromkeys(b["branch"] for b in result["branches"]))
+    colours = {"prolate": "tab:blue", "oblate": "tab:orange", "stomatocyte": "tab:green"}
+    styles = {e: s for e, s in zip(result["eps"], ("-", "-", "-"), strict=False)}
+    fig, axes = plt.subplots(1, len(result["eps"]), figsize=(5.2 * len(result["eps"]), 4.4),
+                             squeeze=False, sharey=True)
+    for ax, eps in zip(axes[0], result["eps"], strict=True):
+        for seed in seeds:
+            pts = curves.get((seed, eps), [])
+            for (v0, e0, u0), (v1, e1, u1) in zip(pts, pts[1:], strict=False):
+                ok = u0 == 0 and u1 == 0
+                ax.plot([v0, v1], [e0, e1], styles[eps] if ok else "--",
+                        color=colours.get(seed, "k"), lw=2.0 if ok else 1.0)
+            ax.plot([], [], color=colours.get(seed, "k"), label=seed)
+            row = next(b for b in result["branches"] if b["branch"] == seed and b["eps"] == eps)
+            for b in row["bifurcations"]:
+                e_at = _e_at(pts, b["v"])
+                if e_at is not None:
+                    ax.plot([b["v"]], [e_at], "D", mfc="none", mec="k", ms=6)
+                    ax.annotate(f"m={b['m']}", (b["v"], e_at), textcoords="offset points",
+                                xytext=(3, 5), fontsize=7)
+        ax.set(xlabel="v", title=f"ε = {eps:g}: solid stable in 3D, dashed not; ◇ bifurcation")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("e = W / W_sphere")
+    axes[0][0].legend(fontsize=8)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=100, colours=48)
+    plt.close(fig)
+
+
+def _e_at(pts, v):
+    for (v0, e0, _), (v1, e1, _) in zip(pts, pts[1:], strict=False):
+        if min(v0, v1) <= v <= max(v0, v1) and v1 != v0:
+            return e0 + (v - v0) * (e1 - e0) / (v1 - v0)
+    return None
+
+
+def write_report(out: Path, result: dict, suffix: str = "") -> None:
+    lines = ["# Is it stable in 3D? The minimal model's branches in every azimuthal mode", "",
+             "Written by `studies/azimuthal.py`: each branch followed down in v by "
+             "`fem_ade.branch` (axisymmetric, order 8, 2.5 nodes per ε, Newton on every "
+             f"point) with the azimuthal modes m = 0 … {result['modes']} at every point "
+             "(`fem_ade.fem.modes`: the lowest eigenvalue of each block, the unstable count "
+             "from the LU's inertia; docs/model.md §13). Stable in 3D: no unstable "
+             "direction in any block (m ≥ 1 counted twice). A bifurcation: a block's "
+             "unstable count changes between two points (its v where the block's lowest "
+             "eigenvalue crosses zero; `*` where that is not the crossing eigenvalue, the "
+             "midpoint).", "",
+             "| branch | R₀ | ε | points | from → end (label) | folds | stable in 3D (v) | "
+             "bifurcations (m at v) | s |", "|---|---|---|---|---|---|---|---|---|"]
+    for b in result["branches"]:
+        stretch = ", ".join(f"{a:.4f} → {z:.4f}" for a, z in b["stable_3d"]) or "nowhere"
+        forks = ", ".join(f"m = {f['m']} at {f['v']:.4f}" + ("" if f["located"] else "*")
+                          + f" ({f['unstable'][0]} → {f['unstable'][1]})"
+                          for f in b["bifurcations"]) or "none"
+        end = (f"{b['from']:g} ({b['first_label']}) → {b['end']:.4f} ({b['end_label']})"
+               if b["points"] else "—")
+        folds = ", ".join(f"{x:.4f}" for x in b["folds"]) or "—"
+        lines.append(f"| {b['branch']} | {b['R0']:g} | {b['eps']:g} | {b['points']} | {end} | "
+                     f"{folds} | {stretch} | {forks} | {b['seconds']:.0f} |")
+    lines += ["", "## The bifurcations as ε → 0", "",
+              "Each bifurcation of a branch, by its mode m and its order k along the branch "
+              "(from the start), at each ε; extrapolated by Richardson over the two smallest "
+              "ε with p = 2 assumed (observed where three ε give one).", "",
+              "| branch | m | k | " + " | ".join(f"ε = {e:g}" for e in result["eps"])
+              + " | ε → 0 | p |", "|---|---|---|" + "---|" * (len(result["eps"]) + 2)]
+    for f in result["bifurcations"]:
+        cells = [f"{f['at'][f'{e:g}']:.4f}" if f"{e:g}" in f["at"] else "—"
+                 for e in result["eps"]]
+        ext = "—" if f["extrapolated"] is None else f"{f['extrapolated']:.4f}"
+        p = "—" if f["extrapolated"] is None else ("2 (assumed)" if f["order"] is None
+                                                   else f"{f['order']:.2f}")
+        lines.append(f"| {f['branch']} | {f['m']} | {f['k']} | " + " | ".join(cells)
+                     + f" | {ext} | {p} |")
+    lines += ["", f"![e along the branches, stable in 3D or not](azimuthal{suffix}.png)", ""]
+    notes = out / f"azimuthal{suffix}_notes.md"
+    if notes.is_file():
+        lines += [notes.read_text().rstrip(), ""]
+    (out / f"azimuthal{suffix}.md").write_text("\n".join(lines))
+
+
+def main(argv=None) -> dict:
+    import sys
+
+    from fem_ade.output import write_json_atomic
+    from fem_ade.sweep import listed_sweep, report_rows, run_sweep
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--eps", type=float, nargs="+", help="the ε (default 0.02 0.01)")
+    ap.add_argument("--quick", action="store_true", help="ε = 0.04, short stretches")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--report-only", action="store_true")
+    args = ap.parse_args(argv)
+    suffix = "_quick" if args.quick else ""
+    eps_list = tuple(args.eps) if args.eps else (QUICK_EPS if args.quick else EPS)
+    branches = QUICK if args.quick else BRANCHES
+    modes = 3 if args.quick else MODES
+    sweep = listed_sweep(f"azimuthal{suffix}", plan(eps_list, branches, modes=modes))
+    root = args.out / f"azimuthal{suffix}"
+    if args.report_only:
+        report_rows(sweep, root)
+    else:
+        run_sweep(sweep, root, workers=args.workers)
+    result, curves = summarize(root, eps_list, branches, modes)
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(args.out / f"azimuthal{suffix}.json", result)
+    draw(args.out / f"azimuthal{suffix}.png", curves, result)
+    write_report(args.out, result, suffix)
+    print(f"wrote {args.out / f'azimuthal{suffix}.md'}")
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,137 @@
+"""What a branch point costs with each solver (issue 42's targets), measured in one run.
+
+At ε = 0.005 (the prolate at R₀ = 0.17 from v = 0.69, order 8, 2.5 nodes per ε: 66265
+nodes) and, with ``--small``, at ε = 0.0025: one continuation point (the same predictor
+from the same three points) corrected by Newton with the direct solve (the sparse LU of the
+Hessian in mixed form, docs/model.md §13) and with MINRES preconditioned by the bulk Hessian
+(the path before), and the point's stability — the m = 0 block by shift-invert on the LU and
+by ARPACK's regular mode (the path before), and the blocks m = 0 … 8. Prints each time, the
+ratios, and the targets of the issue (a point with its m = 0 stability in ≤ 10 s, with
+m ≤ 8 in ≤ 20 s, at ε = 0.0025 in ≤ 60 s), one thread, and writes
+``OUT/solver_bench.json``. The branches it starts from are made once in
+``OUT/solver_bench/`` (kept: a second run measures only).
+
+    python studies/solver_bench.py --out studies/results [--small] [--no-old]
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+OUT = Path("runs") / "studies"
+#: (ε, R₀, from, to): the branches the points are taken from
+CASES = {0.005: (0.17, 0.69, 0.685), 0.0025: (0.17, 0.69, 0.688), 0.04: (0.2, 0.85, 0.84)}
+TARGETS = {"point_m0_s": 10.0, "point_m8_s": 20.0, "point_small_s": 60.0}
+
+
+def branch_folder(root: Path, eps: float) -> Path:
+    """A prolate branch of three points at ε (made once, without stability)."""
+    from fem_ade.branch import follow, vesicle_for_branch
+
+    R0, start, stop = CASES[eps]
+    out = root / f"prolate-eps={eps:g}"
+    scene = vesicle_for_branch({"branch": "prolate", "eps": eps, "R0": R0}, "v", start, stop)
+    follow(scene, param="v", start=start, stop=stop, step=0.005, out=out, quiet=True,
+           stable=False, max_points=3)
+    return out
+
+
+def measure(folder: Path, old: bool) -> dict:
+    """The times of one continuation point and of its stability, each solver."""
+    import numpy as np
+
+    from fem_ade.branch import Continuation, load_points
+    from fem_ade.fem.newton import NewtonSystem
+    from fem_ade.stability import axisymmetric, cartesian, load_state
+
+    points = load_points(folder)[:3]
+    be, _ = load_state(folder / "points" / f"{len(points) - 1:04d}")
+    out = {"nodes": int(be.phi.size)}
+    history = [(phi, row["v"]) for row, phi in points]
+    for linear in ("direct", "minres") if old else ("direct",):
+        cont = Continuation(be, "v")
+        cont.sys = NewtonSystem(be, linear)
+        cont.theta = points[-1][0]["theta"]
+        be._set(points[-1][1], None)
+        cont.set_p(points[-1][0]["v"])
+        t0 = time.perf_counter()
+        corrected, _ = cont.advance(history, None, points[-1][0]["ds_next"], 1e-4)
+        out[f"newton_{linear}_s"] = round(time.perf_counter() - t0, 2)
+        out[f"newton_{linear}_iterations"] = corrected[2]
+        out[f"E_{linear}"] = float(be.diagnostics()["E"]) if corrected else None
+        phi_new = corrected[0]
+    be._set(phi_new, None)
+    t0 = time.perf_counter()
+    m0 = axisymmetric(be, (0,), 4)
+    out["stability_m0_s"] = round(time.perf_counter() - t0, 2)
+    out["eigenvalues_m0"] = [float(x) for x in m0.modes[0]]
+    t0 = time.perf_counter()
+    allm = axisymmetric(be, range(9), 1)
+    out["stability_m8_s"] = round(time.perf_counter() - t0, 2)
+    out["lowest_per_mode"] = {str(m): allm.lowest(m) for m in allm.modes}
+    if old:
+        t0 = time.perf_counter()
+        before = cartesian(be, 4)
+        out["stability_m0_old_s"] = round(time.perf_counter() - t0, 2)
+        out["eigenvalues_m0_old"] = [float(x) for x in before.eigenvalues]
+        out["eigenvalues_agree"] = float(np.max(np.abs(np.asarray(before.eigenvalues)
+                                                      / np.asarray(m0.modes[0]) - 1)))
+    return out
+
+
+def main(argv=None) -> dict:
+    from fem_ade.output import write_json_atomic
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--small", action="store_true", help="also ε = 0.0025")
+    ap.add_argument("--no-old", dest="old", action="store_false",
+                    help="without the paths before (MINRES, ARPACK's regular mode)")
+    ap.add_argument("--quick", action="store_true", help="ε = 0.04: the code, in seconds")
+    args = ap.parse_args(argv)
+    root = args.out / ("solver_bench_quick" if args.quick else "solver_bench")
+    result = {}
+    first = 0.04 if args.quick else 0.005
+    for eps in (first, 0.0025) if args.small else (first,):
+        folder = branch_folder(root, eps)
+        r = measure(folder, args.old and eps == first)
+        r["point_m0_s"] = round(r["newton_direct_s"] + r["stability_m0_s"], 2)
+        r["point_m8_s"] = round(r["newton_direct_s"] + r["stability_m8_s"], 2)
+        if "newton_minres_s" in r:
+            r["point_before_s"] = round(r["newton_minres_s"] + r["stability_m0_old_s"], 2)
+            r["speedup_point_m0"] = round(r["point_before_s"] / r["point_m0_s"], 1)
+            r["speedup_newton"] = round(r["newton_minres_s"] / r["newton_direct_s"], 1)
+            r["speedup_stability_m0"] = round(r["stability_m0_old_s"] / r["stability_m0_s"], 1)
+        result[f"{eps:g}"] = r
+        print(f"eps = {eps:g} ({r['nodes']} nodes): Newton {r['newton_direct_s']} s "
+              f"({r['newton_direct_iterations']} iterations), stability m = 0 "
+              f"{r['stability_m0_s']} s, m = 0..8 {r['stability_m8_s']} s; a point with m = 0 "
+              f"{r['point_m0_s']} s, with m <= 8 {r['point_m8_s']} s", flush=True)
+        if "point_before_s" in r:
+            print(f"  before: Newton-MINRES {r['newton_minres_s']} s, ARPACK regular mode "
+                  f"{r['stability_m0_old_s']} s: a point {r['point_before_s']} s; "
+                  f"{r['speedup_point_m0']}x (Newton {r['speedup_newton']}x, stability "
+                  f"{r['speedup_stability_m0']}x); eigenvalues agree to "
+                  f"{r['eigenvalues_agree']:.1e}", flush=True)
+    small = result.get("0.0025")
+    checks = {"point_m0_s": result[f"{first:g}"]["point_m0_s"],
+              "point_m8_s": result[f"{first:g}"]["point_m8_s"],
+              "point_small_s": small["point_m0_s"] if small else None}
+    for key, value in checks.items():
+        if value is not None:
+            print(f"  target {key} <= {TARGETS[key]:g} s: {value} s "
+                  f"({'met' if value <= TARGETS[key] else 'not met'})")
+    name = "solver_bench_quick.json" if args.quick else "solver_bench.json"
+    write_json_atomic(args.out / name, {"cases": result, "targets": TARGETS, "checks": checks})
+    return result
+
+
+if __name__ == "__main__":
+    main()
