@@ -77,7 +77,7 @@ from .vesicle import PARAMETERS, get_parameter, set_parameter  # noqa: F401 (the
 #: quadratic basin (:mod:`fem_ade.fem.newton`), not an inexact solve
 MAX_NEWTON, GROW_BELOW = 12, 4
 #: the lowest eigenvalues of the m = 0 block computed at each point (stability; the
-#: threshold below which a direction counts as unstable: :data:`fem_ade.stability.UNSTABLE`)
+#: threshold below which a direction counts as unstable: :func:`fem_ade.stability.threshold`)
 EIGENVALUES = 4
 #: the most azimuthal modes a branch computes at each point, and the command line's default
 MAX_MODES, DEFAULT_MODES = 32, 8

@@ -18,8 +18,12 @@ energy falls along. Rigid motions cost nothing in the continuous problem and are
   constrained Hessian by ARPACK's Lanczos in regular mode, P⁻¹ by the fast
   diagonalization, the three translations and the rotations taken out (:func:`cartesian`).
 
-A direction counts as unstable below :data:`UNSTABLE` (in units of P; the shape modes'
-eigenvalues are 1e-6 … 1e-2 there).
+A direction counts as unstable below a threshold (:func:`threshold`): in units of P the
+shape modes' eigenvalues scale as (ε/R₀)⁴ (P is the bulk Hessian, 4κ/ε³ per unit volume;
+measured: the prolate's lowest m = 0 one 4.8e-4 at ε = 0.02 and 3.1e-5 at 0.01, R₀ = 0.25),
+so a fixed threshold would mean another thing at every ε — the −1e-6 of before counted the
+oblate's m = 2 eigenvalue (−1.6e-6 … −5e-7 along it at ε = 0.01) as unstable at some points
+and stable at their neighbours.
 """
 
 from __future__ import annotations
@@ -35,8 +39,17 @@ import numpy as np
 
 from .model import ModelError
 
-#: the eigenvalue (in units of P) below which a direction counts as unstable
-UNSTABLE = -1e-6
+#: the eigenvalue below which a direction counts as unstable, in units of P·(ε/R₀)⁴ (the
+#: shape modes' scale, :func:`threshold`): −1e-6 at ε/R₀ = 0.08, the value used before at
+#: every ε (the shape modes' eigenvalues there are 1e-5 … 1e-2)
+UNSTABLE = -0.025
+
+
+def threshold(params) -> float:
+    """The eigenvalue (in units of P) below which a direction of a state with ``params``
+    counts as unstable: :data:`UNSTABLE`·(ε/R₀)⁴, R₀ = √(β/4π)."""
+    R0 = math.sqrt(params.beta / (4.0 * math.pi))
+    return UNSTABLE * (params.eps / R0) ** 4
 #: the modes and eigenvalues per mode the command line computes by default
 MODES, EIGENVALUES = 8, 4
 #: where the directions off the constraints' tangent space are put in the 3D operator
@@ -70,9 +83,10 @@ class Stability:
 
 
 def axisymmetric(be, modes=range(MODES + 1), k: int = EIGENVALUES,
-                 threshold: float = UNSTABLE) -> Stability:
+                 below: float | None = None) -> Stability:
     """The stability of an axisymmetric backend's state in the azimuthal ``modes``: per mode
-    the ``k`` lowest eigenvalues and the count below ``threshold`` (module docstring)."""
+    the ``k`` lowest eigenvalues and the count below ``below`` (default :func:`threshold`;
+    module docstring)."""
     import time
 
     from .fem.modes import lowest
@@ -81,9 +95,10 @@ def axisymmetric(be, modes=range(MODES + 1), k: int = EIGENVALUES,
     sys_ = NewtonSystem(be)
     lin = linearize(sys_, be.phi.copy())
     out = Stability("axisymmetric")
+    sigma = threshold(be.params) if below is None else below
     for m in modes:
         t0 = time.perf_counter()
-        result = lowest(sys_, lin, int(m), k=k, sigma=threshold)
+        result = lowest(sys_, lin, int(m), k=k, sigma=sigma)
         out.modes[int(m)] = result.eigenvalues
         out.unstable[int(m)] = result.unstable
         out.seconds[int(m)] = round(time.perf_counter() - t0, 3)
@@ -130,7 +145,7 @@ def _derivative(axis):
     return sp.diags(1.0 / shared) @ A
 
 
-def cartesian(be, k: int = EIGENVALUES, threshold: float = UNSTABLE,
+def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
               tol: float = 1e-9) -> Stability:
     """The ``k`` lowest eigenvalues of H_L v = λ P v of a 3D FEM state on {Cᵀv = 0}, C the
     constraints' gradients and P times each rigid motion (a negligible one — a rotation
@@ -180,7 +195,8 @@ def cartesian(be, k: int = EIGENVALUES, threshold: float = UNSTABLE,
                  return_eigenvectors=False, v0=np.ones(N))
     vals = np.sort(vals)
     out = Stability("cartesian", eigenvalues=list(vals),
-                    unstable_3d=int(np.sum(vals < threshold)))
+                    unstable_3d=int(np.sum(vals < (threshold(be.params) if below is None
+                                                   else below))))
     out.seconds["all"] = round(time.perf_counter() - t0, 3)
     return out
 

@@ -3,7 +3,8 @@ azimuthal mode m = 0 … 8, and where non-axisymmetric shapes are born (issue 43
 
 Each branch — the prolate (R₀ = 0.17, from v = 0.95), the oblate (R₀ = 0.25, from 0.95) and
 the stomatocyte (R₀ = 0.25, from 0.62) — is followed down in v by ``fem_ade.branch`` with
-``modes = 8`` at each ε (a branch sweep of listed points, :mod:`fem_ade.sweep`, two Dask
+``modes = 8`` at ε = 0.02 and 0.01, and at 0.005 over windows around the bifurcations found
+there (:data:`WINDOWS`; a branch sweep of listed points, :mod:`fem_ade.sweep`, two Dask
 workers, resumable): at every point the lowest eigenvalue of each block m and the count of
 unstable 3D directions (m ≥ 1 counted twice: cos mθ and sin mθ), and the bifurcations where
 a block's count changes (``bifurcations.json``: m ≥ 1 a non-axisymmetric branch is born;
@@ -16,7 +17,7 @@ each ε; the extrapolations; the hand-written notes of ``OUT/azimuthal_notes.md`
 ``OUT/azimuthal.json`` and ``OUT/azimuthal.png`` (e against v, stable in 3D solid, unstable
 dashed, each bifurcation marked with its m); the branch folders in
 ``OUT/azimuthal/points/NAME`` (their ``points/`` are not committed). ``--report-only``
-rebuilds the report from the folders; ``--eps`` chooses the ε (default 0.02 0.01).
+rebuilds the report from the folders; ``--eps`` chooses the ε (default 0.02 0.01 0.005).
 
     python studies/azimuthal.py --out studies/results
     python studies/azimuthal.py --quick           # ε = 0.04, short stretches: the code
@@ -41,7 +42,14 @@ BRANCHES = [("prolate", 0.17, 0.95, 0.58), ("oblate", 0.25, 0.95, 0.52),
             ("stomatocyte", 0.25, 0.62, 0.50)]
 QUICK = [("prolate", 0.2, 0.85, 0.8), ("oblate", 0.25, 0.85, 0.78)]
 STEP, MODES = 0.01, 8
-EPS, QUICK_EPS = (0.02, 0.01), (0.04,)
+EPS, QUICK_EPS = (0.02, 0.01, 0.005), (0.04,)
+#: the step in v at each ε (Newton takes 8-10 iterations a point at ε ≤ 0.01, so the step
+#: does not grow there: a coarser one halves the points; the bifurcations are located
+#: between points by the eigenvalue's zero)
+STEPS = {0.02: 0.01, 0.01: 0.02, 0.005: 0.02}
+#: at these ε only a window of some branches (a point there costs ~30 s): the oblate around
+#: its m = 2 bifurcation, the prolate around its low-v m = 1 one (found at 0.02 and 0.01)
+WINDOWS = {0.005: {"oblate": (0.84, 0.70), "prolate": (0.64, 0.56)}}
 #: the sharp membrane's transitions of the lowest branch (sharp_limit.md), for the report
 SHARP = {"prolate → oblate": 0.6511, "oblate → stomatocyte": 0.5912}
 
@@ -50,12 +58,24 @@ def name_of(seed: str, R0: float, eps: float) -> str:
     return f"{seed}-R0={R0:g}-eps={eps:g}"
 
 
-def plan(eps_list, branches, step: float = STEP, modes: int = MODES) -> list[dict]:
-    """The sweep's listed branch points."""
-    return [{"name": name_of(seed, R0, eps), "seed": seed, "scene": {"eps": eps, "R0": R0},
-             "branch": {"param": "v", "from": start, "to": stop, "step": step,
-                        "folds": None, "modes": modes}}
-            for eps in eps_list for seed, R0, start, stop in branches]
+def plan(eps_list, branches, step: float = STEP, modes: int = MODES,
+         windows: dict | None = None) -> list[dict]:
+    """The sweep's listed branch points (at an ε of ``windows``, only its branches, over
+    their windows)."""
+    windows = WINDOWS if windows is None else windows
+    out = []
+    for eps in eps_list:
+        for seed, R0, start, stop in branches:
+            if eps in windows:
+                if seed not in windows[eps]:
+                    continue
+                start, stop = windows[eps][seed]
+            out.append({"name": name_of(seed, R0, eps), "seed": seed,
+                        "scene": {"eps": eps, "R0": R0},
+                        "branch": {"param": "v", "from": start, "to": stop,
+                                   "step": STEPS.get(eps, step),
+                                   "folds": None, "modes": modes}})
+    return out
 
 
 def rows_of(root: Path, name: str) -> tuple[list[dict], list[dict]]:
@@ -99,6 +119,10 @@ def summarize(root: Path, eps_list, branches, modes: int = MODES) -> dict:
     table, curves = [], {}
     for seed, R0, start, stop in branches:
         for eps in eps_list:
+            if eps in WINDOWS:
+                if seed not in WINDOWS[eps]:
+                    continue
+                start, stop = WINDOWS[eps][seed]
             rows, forks = rows_of(root, name_of(seed, R0, eps))
             curves[(seed, eps)] = [(r["v"], r["e"], r.get("unstable_3d")) for r in rows]
             table.append({
@@ -144,7 +168,6 @@ def draw(path: Path, curves: dict, result: dict) -> None:
 
     seeds = list(dict.fromkeys(b["branch"] for b in result["branches"]))
     colours = {"prolate": "tab:blue", "oblate": "tab:orange", "stomatocyte": "tab:green"}
-    styles = {e: s for e, s in zip(result["eps"], ("-", "-", "-"), strict=False)}
     fig, axes = plt.subplots(1, len(result["eps"]), figsize=(5.2 * len(result["eps"]), 4.4),
                              squeeze=False, sharey=True)
     for ax, eps in zip(axes[0], result["eps"], strict=True):
@@ -152,11 +175,13 @@ def draw(path: Path, curves: dict, result: dict) -> None:
             pts = curves.get((seed, eps), [])
             for (v0, e0, u0), (v1, e1, u1) in zip(pts, pts[1:], strict=False):
                 ok = u0 == 0 and u1 == 0
-                ax.plot([v0, v1], [e0, e1], styles[eps] if ok else "--",
+                ax.plot([v0, v1], [e0, e1], "-" if ok else "--",
                         color=colours.get(seed, "k"), lw=2.0 if ok else 1.0)
-            ax.plot([], [], color=colours.get(seed, "k"), label=seed)
-            row = next(b for b in result["branches"] if b["branch"] == seed and b["eps"] == eps)
-            for b in row["bifurcations"]:
+            if pts:
+                ax.plot([], [], color=colours.get(seed, "k"), label=seed)
+            row = next((b for b in result["branches"]
+                        if b["branch"] == seed and b["eps"] == eps), None)
+            for b in row["bifurcations"] if row else []:
                 e_at = _e_at(pts, b["v"])
                 if e_at is not None:
                     ax.plot([b["v"]], [e_at], "D", mfc="none", mec="k", ms=6)
@@ -165,7 +190,8 @@ def draw(path: Path, curves: dict, result: dict) -> None:
         ax.set(xlabel="v", title=f"ε = {eps:g}: solid stable in 3D, dashed not; ◇ bifurcation")
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("e = W / W_sphere")
-    axes[0][0].legend(fontsize=8)
+    for ax in axes[0]:
+        ax.legend(fontsize=8)
     fig.tight_layout()
     save_figure(fig, path, dpi=100, colours=48)
     plt.close(fig)
@@ -231,7 +257,7 @@ def main(argv=None) -> dict:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=OUT)
-    ap.add_argument("--eps", type=float, nargs="+", help="the ε (default 0.02 0.01)")
+    ap.add_argument("--eps", type=float, nargs="+", help="the ε (default 0.02 0.01 0.005)")
     ap.add_argument("--quick", action="store_true", help="ε = 0.04, short stretches")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--report-only", action="store_true")

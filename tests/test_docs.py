@@ -135,7 +135,7 @@ def test_anchors_name_a_heading(page, target):
 
 def test_the_docs_quote_the_main_commands():
     """The scan finds what the pages quote (a scan that found nothing would pass vacuously)."""
-    for name in ("-m fem_ade.run", "-m fem_ade.sweep", "-m fem_ade.branch",
+    for name in ("-m fem_ade.run", "-m fem_ade.sweep", "-m fem_ade.branch", "-m fem_ade.stability",
                  "-m fem_ade.render", "-m sharp_ref"):
         assert name in COMMANDS, (name, sorted(COMMANDS))
     assert any(name.startswith("studies/") for name in COMMANDS), sorted(COMMANDS)
