@@ -814,7 +814,7 @@ def check_follow(scene, *, param: str, start: float, stop: float, step: float,
 
 def _check_out(out) -> Path:
     """``--out`` as a path a branch folder can be made in (ModelError, one line)."""
-    from .output import check_path_name
+    from .output import check_creatable, check_path_name
 
     if not isinstance(out, (str, Path)) or str(out).strip() in ("", "."):
         raise ModelError("--out needs a folder name (a new folder, or the branch's own)")
@@ -822,13 +822,11 @@ def _check_out(out) -> Path:
     check_path_name(out)
     if out.exists() and not out.is_dir():
         raise ModelError(f"--out {out} exists and is not a folder")
-    parent = out if out.exists() else out.parent
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        raise ModelError(f"--out {out}: {parent} is not a folder")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise ModelError(f"--out {out}: {parent} is not writable")
+    if out.exists():
+        if not os.access(out, os.W_OK | os.X_OK):
+            raise ModelError(f"--out {out} is not writable")
+    else:
+        check_creatable(out)
     return out
 
 

@@ -106,14 +106,20 @@ def check_out_dir(path: str | Path, *, force: bool = False) -> Path:
         if not os.access(path, os.W_OK | os.X_OK):
             raise ModelError(f"--out {path} is not writable")
         return path
-    parent = path.parent
+    check_creatable(path)
+    return path
+
+
+def check_creatable(path: Path, what: str = "--out") -> None:
+    """ModelError (one line) unless ``path`` can be made: its nearest existing ancestor a
+    writable folder."""
+    parent = Path(path).parent
     while not parent.exists():
         parent = parent.parent
     if not parent.is_dir():
-        raise ModelError(f"--out {path}: {parent} is not a folder")
+        raise ModelError(f"{what} {path}: {parent} is not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise ModelError(f"--out {path}: cannot create it, {parent} is not writable")
-    return path
+        raise ModelError(f"{what} {path}: cannot create it, {parent} is not writable")
 
 
 def prepare_out_dir(path: Path, *, force: bool = False, fresh: bool = False):

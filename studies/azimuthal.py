@@ -47,9 +47,9 @@ EPS, QUICK_EPS = (0.02, 0.01, 0.005), (0.04,)
 #: does not grow there: a coarser one halves the points; the bifurcations are located
 #: between points by the eigenvalue's zero)
 STEPS = {0.02: 0.01, 0.01: 0.02, 0.005: 0.02}
-#: at these ε only a window of some branches (a point there costs ~30 s): the oblate around
-#: its m = 2 bifurcation, the prolate around its low-v m = 1 one (found at 0.02 and 0.01)
-WINDOWS = {0.005: {"oblate": (0.84, 0.70), "prolate": (0.64, 0.56)}}
+#: at these ε only a window of some branches (a point there costs ~30 s, ~0.0016 apart in v):
+#: the oblate around its m = 2 bifurcation (0.80 at ε = 0.04, 0.762 at 0.02)
+WINDOWS = {0.005: {"oblate": (0.775, 0.735)}}
 #: the sharp membrane's transitions of the lowest branch (sharp_limit.md), for the report
 SHARP = {"prolate → oblate": 0.6511, "oblate → stomatocyte": 0.5912}
 
@@ -116,6 +116,8 @@ def summarize(root: Path, eps_list, branches, modes: int = MODES) -> dict:
     extrapolation."""
     from sharp_limit import extrapolate
 
+    from fem_ade.branch import same_branch
+
     table, curves = [], {}
     for seed, R0, start, stop in branches:
         for eps in eps_list:
@@ -124,13 +126,18 @@ def summarize(root: Path, eps_list, branches, modes: int = MODES) -> dict:
                     continue
                 start, stop = WINDOWS[eps][seed]
             rows, forks = rows_of(root, name_of(seed, R0, eps))
-            curves[(seed, eps)] = [(r["v"], r["e"], r.get("unstable_3d")) for r in rows]
+            other = bool(rows) and not same_branch(seed, rows[0]["label"])
+            if other:  # its seed relaxed into another shape: not this branch (set aside)
+                forks = []
+            curves[(seed, eps)] = [] if other else [(r["v"], r["e"], r.get("unstable_3d"))
+                                                    for r in rows]
             table.append({
                 "branch": seed, "R0": R0, "eps": eps, "points": len(rows),
                 "from": start, "to": stop,
                 "end": rows[-1]["v"] if rows else None,
                 "end_label": rows[-1]["label"] if rows else None,
                 "first_label": rows[0]["label"] if rows else None,
+                "not_this_branch": other,
                 "folds": [float(r["fold"]) for r in rows if r.get("fold") not in (None, "")],
                 "stable_3d": stable_stretches(rows),
                 "unstable_3d_at_start": rows[0].get("unstable_3d") if rows else None,
@@ -224,6 +231,9 @@ def write_report(out: Path, result: dict, suffix: str = "") -> None:
                           for f in b["bifurcations"]) or "none"
         end = (f"{b['from']:g} ({b['first_label']}) → {b['end']:.4f} ({b['end_label']})"
                if b["points"] else "—")
+        if b["not_this_branch"]:
+            stretch = forks = (f"its seed relaxed into a {b['first_label']}: not this "
+                               "branch, set aside")
         folds = ", ".join(f"{x:.4f}" for x in b["folds"]) or "—"
         lines.append(f"| {b['branch']} | {b['R0']:g} | {b['eps']:g} | {b['points']} | {end} | "
                      f"{folds} | {stretch} | {forks} | {b['seconds']:.0f} |")
