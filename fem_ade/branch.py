@@ -562,9 +562,12 @@ def bifurcations(rows: list[dict], name: str) -> list[dict]:
     non-axisymmetric branch is born (in 3D a circle of them, cos mθ and sin mθ), m = 0
     without a fold between the two points an axisymmetric symmetry-breaking one (at a fold
     the m = 0 count changes too: that is the fold, in ``fold``). Located like the folds: the
-    zero of the mode's lowest eigenvalue, linear in the arclength between the two points
-    (where the count changed from 0 or to 0; else the midpoint, ``located`` False), and the
-    parameter there."""
+    zero of the mode's lowest eigenvalue, linear in the arclength, where the count changed
+    from 0 or to 0 (else the midpoint, ``located`` False), and the parameter there. The
+    count is taken below a threshold (:func:`fem_ade.stability.threshold`), so a point
+    whose eigenvalue lies between it and 0 moves the change one interval away from the
+    zero: the zero is then looked for in the neighbouring interval too (``between``: the
+    interval where it is)."""
     out = []
     for i in range(len(rows) - 1):
         a, b = rows[i], rows[i + 1]
@@ -577,18 +580,35 @@ def bifurcations(rows: list[dict], name: str) -> list[dict]:
             m = int(key)
             if m == 0 and (a.get("fold") or b.get("fold")):
                 continue
-            la, lb = a.get(f"lowest_m{m}"), b.get(f"lowest_m{m}")
-            sa, sb = float(a.get("s", i)), float(b.get("s", i + 1))
-            located = min(ca[key], cb[key]) == 0 and la is not None and lb is not None \
-                and la * lb < 0
-            t = la / (la - lb) if located else 0.5
-            s_star = sa + t * (sb - sa)
-            out.append({"m": m, name: float(a[name] + t * (b[name] - a[name])), "s": s_star,
-                        "between": [i, i + 1], "unstable": [ca[key], cb[key]],
-                        "located": bool(located),
+            j, t = i, None
+            if min(ca[key], cb[key]) == 0:
+                j, t = _zero_near(rows, i, f"lowest_m{m}", rising=ca[key] > cb[key])
+            located = t is not None
+            t = 0.5 if t is None else t
+            ra, rb = rows[j], rows[j + 1]
+            sa, sb = float(ra.get("s", j)), float(rb.get("s", j + 1))
+            out.append({"m": m, name: float(ra[name] + t * (rb[name] - ra[name])),
+                        "s": sa + t * (sb - sa), "between": [j, j + 1],
+                        "unstable": [ca[key], cb[key]], "located": bool(located),
                         "kind": f"non-axisymmetric (m = {m})" if m else
                         "axisymmetric symmetry breaking (m = 0, no fold)"})
     return out
+
+
+def _zero_near(rows: list[dict], i: int, column: str, rising: bool) -> tuple[int, float | None]:
+    """(j, t): the zero of ``column`` at the fraction t of rows j … j+1, looked for between
+    rows i, i+1 and then in the intervals beside them, crossing upwards (``rising``: the
+    count fell) or downwards; (i, None) where none of them holds it."""
+    for j in (i, i - 1, i + 1):
+        if not 0 <= j < len(rows) - 1:
+            continue
+        la, lb = rows[j].get(column), rows[j + 1].get(column)
+        if la is None or lb is None or la == "" or lb == "":
+            continue
+        la, lb = float(la), float(lb)
+        if (la < 0.0 <= lb) if rising else (lb < 0.0 <= la):
+            return j, la / (la - lb)
+    return i, None
 
 
 def draw(out: Path, name: str, rows: list[dict], meridians: list) -> list[Path]:

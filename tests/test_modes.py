@@ -166,12 +166,9 @@ def test_a_spheres_modes_are_its_multiplets(monkeypatch):
     assert not _multiplets_hold(sys_, lin)
 
 
-@pytest.fixture(scope="module")
-def revolved(prolate):
-    """The prolate's first point revolved into 3D (order 8, 64³ nodes: the same spacing as
-    the axisymmetric mesh's fine zone) and made steady there by Newton."""
-    _, ax = prolate
-    scene = vesicle_scene(v=0.85, branch="prolate", eps=0.04, R0=0.2)
+def _revolve(ax, scene):
+    """An axisymmetric state revolved into 3D (order 8, 64³ nodes: the same spacing as the
+    axisymmetric mesh's fine zone at ε = 0.04) and made steady there by Newton."""
     be = make_backend("fem", scene, n=8, order=8, scheme="stabilized", constraints="exact",
                       dt=1e-6)
     be.stepper.params = be.params = ax.params
@@ -186,6 +183,12 @@ def revolved(prolate):
     return be
 
 
+@pytest.fixture(scope="module")
+def revolved(prolate):
+    """The prolate's first point revolved into 3D and made steady there."""
+    return _revolve(prolate[1], vesicle_scene(v=0.85, branch="prolate", eps=0.04, R0=0.2))
+
+
 def test_the_blocks_are_the_3d_spectrum(prolate, revolved):
     """Check (b): the six lowest eigenvalues of the 3D constrained Hessian (its rigid
     motions taken out) are the union of the blocks' (m ≥ 1 twice: cos and sin) to 1e-3
@@ -196,6 +199,32 @@ def test_the_blocks_are_the_3d_spectrum(prolate, revolved):
                    for x in (list(vals) if m == 0 else 2 * list(vals)))[:6]
     three = cartesian(revolved, 6, tol=1e-7).eigenvalues
     assert np.max(np.abs(np.asarray(three) / np.asarray(union) - 1)) < 1e-3
+
+
+@pytest.mark.slow
+def test_the_oblates_saddle_is_one_in_3d(tmp_path):
+    """Check (b) where a block is unstable: the oblate at ε = 0.04, v = 0.85 (R₀ = 0.25) has
+    one negative eigenvalue in block m = 2 and none in the others; revolved into 3D and made
+    steady there by Newton (a saddle: Newton does not need a minimum), the 3D constrained
+    Hessian has exactly two negative eigenvalues, the m = 2 one's pair (cos 2θ and sin 2θ),
+    and its next four are the blocks' to 1e-3 (measured: 1.6e-4). The pair is split by the
+    cubic mesh, which tells cos 2θ (along its axes) from sin 2θ (along its diagonals):
+    measured −4.602e-4 and −4.579e-4 against the block's −4.584e-4, their mean 0.14 % off."""
+    out = tmp_path / "oblate"
+    assert branch_main(["vesicle", "--branch", "oblate", "--eps", "0.04", "--R0", "0.25",
+                        "--param", "v", "--from", "0.85", "--to", "0.84", "--step", "0.01",
+                        "--quiet", "--modes", "0", "--out", str(out)]) == 0
+    ax, _ = load_state(out / "points" / "0000")
+    blocks = axisymmetric(ax, range(6), 6)
+    assert blocks.unstable == {0: 0, 1: 0, 2: 1, 3: 0, 4: 0, 5: 0}
+    union = sorted(x for m, vals in blocks.modes.items()
+                   for x in (list(vals) if m == 0 else 2 * list(vals)))[:6]
+    three = cartesian(_revolve(ax, vesicle_scene(v=0.85, branch="oblate", eps=0.04, R0=0.25)),
+                      6, tol=1e-7)
+    assert three.unstable_3d == 2 and np.all(np.asarray(three.eigenvalues[:2]) < 0)
+    ratio = np.asarray(three.eigenvalues) / np.asarray(union) - 1
+    assert np.max(np.abs(ratio[2:])) < 1e-3 and np.max(np.abs(ratio[:2])) < 1e-2
+    assert abs(np.mean(ratio[:2])) < 3e-3
 
 
 def test_the_zero_modes_are_taken_out(prolate, monkeypatch):
@@ -248,6 +277,35 @@ def test_branch_modes_and_bifurcations(tmp_path):
     found = json.loads((out / "bifurcations.json").read_text())["bifurcations"]
     assert [b["m"] for b in found] == [2] and found[0]["located"]
     assert 0.78 < found[0]["v"] < 0.814
+
+
+def test_a_bifurcation_is_located_at_the_eigenvalues_zero():
+    """The count is taken below a threshold, so it can change one interval before the
+    eigenvalue's zero (the oblate's m = 2 at ε = 0.005: −5.0e-9 counted unstable below
+    −4e-9, −5.7e-10 stable, the zero in the next interval); the bifurcation is placed at the
+    zero there, not at the midpoint of the interval where the count changed. Where no
+    neighbouring interval holds a zero, the midpoint, ``located`` False."""
+    from fem_ade.branch import bifurcations
+
+    def row(v, lowest, count):
+        return {"v": v, "s": 1.0 - v, "fold": "", "lowest_m2": lowest,
+                "unstable_modes": {"0": 0, "2": count}}
+
+    rows = [row(0.7554, -9.2e-9, 1), row(0.7527, -5.0e-9, 1), row(0.7500, -5.7e-10, 0),
+            row(0.7472, 4.0e-9, 0)]
+    (found,) = bifurcations(rows, "v")
+    assert found["located"] and found["between"] == [2, 3] and found["unstable"] == [1, 0]
+    assert found["v"] == pytest.approx(0.7500 - 5.7e-10 / 4.57e-9 * 0.0028)
+    rows[1]["lowest_m2"] = -4.5e-9  # the zero in the interval itself
+    rows[2]["lowest_m2"] = 1.0e-9
+    (found,) = bifurcations(rows, "v")
+    assert found["between"] == [1, 2] and found["v"] == pytest.approx(0.7527 - 4.5 / 5.5 * 0.0027)
+    rows[2]["lowest_m2"] = rows[3]["lowest_m2"] = -1e-9  # no zero near: the midpoint
+    (found,) = bifurcations(rows, "v")
+    assert not found["located"] and found["v"] == pytest.approx(0.75135)
+    rows[2]["unstable_modes"]["2"] = rows[3]["unstable_modes"]["2"] = 2  # 1 to 2: the midpoint
+    (found,) = bifurcations(rows, "v")
+    assert not found["located"] and found["unstable"] == [1, 2]
 
 
 def test_the_stability_command(prolate, tmp_path, capsys):
