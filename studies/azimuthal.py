@@ -47,34 +47,62 @@ EPS, QUICK_EPS = (0.02, 0.01, 0.005), (0.04,)
 #: does not grow there: a coarser one halves the points; the bifurcations are located
 #: between points by the eigenvalue's zero)
 STEPS = {0.02: 0.01, 0.01: 0.02, 0.005: 0.02}
-#: at these ε only a window of some branches (a point there costs ~30 s, ~0.0016 apart in v):
-#: the oblate around its m = 2 bifurcation (0.80 at ε = 0.04, 0.762 at 0.02)
-WINDOWS = {0.005: {"oblate": (0.775, 0.735)}}
+#: nodes per ε of the windows. The branches take the FEM's default, 2.5 (E to ~1e-5); the
+#: oblate's m = 2 eigenvalue near its zero is not resolved there (at v = 0.79, ε = 0.01:
+#: -1.79e-6 at 2.56 nodes per ε, -8.03e-7 at 3.2, -8.32e-7 at 3.84, -8.30e-7 at 4.48 and
+#: 5.12; the m = 0 block's lowest 2 % off at 2.56), so a bifurcation is located again over a
+#: window at this resolution
+WINDOW_NODES_PER_EPS = 4.0
+#: whole branches down to this ε (at 0.005 a point costs ~30 s and the points are ~0.002
+#: apart in v: windows only)
+WHOLE_DOWN_TO = 0.01
+#: the windows around the oblate's m = 2 bifurcation: (seed, ε) → (from, to). At 2.5 nodes
+#: per ε it was at 0.7624 (ε = 0.02), 0.7902 (0.01), ~0.807 (0.005); at 4 nodes per ε the
+#: m = 2 eigenvalue at v = 0.80 is -1.50e-5, -1.02e-6, -6.7e-8 (ratios 14.7, 15.2: the
+#: (ε/R₀)⁴ of the shape modes), so the ε = 0.005 window is where ε = 0.01 crosses
+WINDOWS = {("oblate", 0.02): (0.80, 0.70), ("oblate", 0.01): (0.80, 0.72),
+           ("oblate", 0.005): (0.775, 0.735)}
 #: the sharp membrane's transitions of the lowest branch (sharp_limit.md), for the report
 SHARP = {"prolate → oblate": 0.6511, "oblate → stomatocyte": 0.5912}
 
 
-def name_of(seed: str, R0: float, eps: float) -> str:
-    return f"{seed}-R0={R0:g}-eps={eps:g}"
+def name_of(seed: str, R0: float, eps: float, n: int | None = None) -> str:
+    return f"{seed}-R0={R0:g}-eps={eps:g}" + (f"-n={n}" if n else "")
+
+
+def window_n(eps: float, order: int = 8) -> int:
+    """The nodes per L of a window at ε: :data:`WINDOW_NODES_PER_EPS` per ε, whole cells."""
+    import math
+
+    return order * math.ceil(WINDOW_NODES_PER_EPS / (eps * order))
+
+
+def runs_of(eps_list, branches, windows: dict | None = None) -> list[tuple]:
+    """(seed, R₀, from, to, ε, n): the branches at each ε (n None: the default resolution;
+    at ε = 0.005 only where a window is), then the windows at those ε."""
+    windows = WINDOWS if windows is None else windows
+    out = [(seed, R0, start, stop, eps, None) for eps in eps_list if eps >= WHOLE_DOWN_TO
+           for seed, R0, start, stop in branches]
+    for eps in eps_list:
+        for seed, R0, _, _ in branches:
+            if (seed, eps) in windows:
+                start, stop = windows[(seed, eps)]
+                out.append((seed, R0, start, stop, eps, window_n(eps)))
+    return out
 
 
 def plan(eps_list, branches, step: float = STEP, modes: int = MODES,
          windows: dict | None = None) -> list[dict]:
-    """The sweep's listed branch points (at an ε of ``windows``, only its branches, over
-    their windows)."""
-    windows = WINDOWS if windows is None else windows
+    """The sweep's listed branch points: the branches, and the windows at their resolution."""
     out = []
-    for eps in eps_list:
-        for seed, R0, start, stop in branches:
-            if eps in windows:
-                if seed not in windows[eps]:
-                    continue
-                start, stop = windows[eps][seed]
-            out.append({"name": name_of(seed, R0, eps), "seed": seed,
-                        "scene": {"eps": eps, "R0": R0},
-                        "branch": {"param": "v", "from": start, "to": stop,
-                                   "step": STEPS.get(eps, step),
-                                   "folds": None, "modes": modes}})
+    for seed, R0, start, stop, eps, n in runs_of(eps_list, branches, windows):
+        point = {"name": name_of(seed, R0, eps, n), "seed": seed,
+                 "scene": {"eps": eps, "R0": R0},
+                 "branch": {"param": "v", "from": start, "to": stop,
+                            "step": STEPS.get(eps, step), "folds": None, "modes": modes}}
+        if n:
+            point["run"] = {"n": n}
+        out.append(point)
     return out
 
 
@@ -119,42 +147,41 @@ def summarize(root: Path, eps_list, branches, modes: int = MODES) -> dict:
     from fem_ade.branch import same_branch
 
     table, curves = [], {}
-    for seed, R0, start, stop in branches:
-        for eps in eps_list:
-            if eps in WINDOWS:
-                if seed not in WINDOWS[eps]:
-                    continue
-                start, stop = WINDOWS[eps][seed]
-            rows, forks = rows_of(root, name_of(seed, R0, eps))
-            other = bool(rows) and not same_branch(seed, rows[0]["label"])
-            if other:  # its seed relaxed into another shape: not this branch (set aside)
-                forks = []
-            curves[(seed, eps)] = [] if other else [(r["v"], r["e"], r.get("unstable_3d"))
-                                                    for r in rows]
-            table.append({
-                "branch": seed, "R0": R0, "eps": eps, "points": len(rows),
-                "from": start, "to": stop,
-                "end": rows[-1]["v"] if rows else None,
-                "end_label": rows[-1]["label"] if rows else None,
-                "first_label": rows[0]["label"] if rows else None,
-                "not_this_branch": other,
-                "folds": [float(r["fold"]) for r in rows if r.get("fold") not in (None, "")],
-                "stable_3d": stable_stretches(rows),
-                "unstable_3d_at_start": rows[0].get("unstable_3d") if rows else None,
-                "bifurcations": [{"m": b["m"], "v": b["v"], "unstable": b["unstable"],
-                                  "located": b["located"]} for b in forks],
-                "seconds": round(sum(float(r.get("seconds") or 0.0) for r in rows), 1)})
+    for seed, R0, start, stop, eps, n in runs_of(eps_list, branches):
+        rows, forks = rows_of(root, name_of(seed, R0, eps, n))
+        other = bool(rows) and not same_branch(seed, rows[0]["label"])
+        if other:  # its seed relaxed into another shape: not this branch (set aside)
+            forks = []
+        curves[(seed, eps, n)] = [] if other else [(r["v"], r["e"], r.get("unstable_3d"))
+                                                   for r in rows]
+        table.append({
+            "branch": seed, "R0": R0, "eps": eps, "n": n,
+            "nodes_per_eps": None if n is None else round(n * eps, 3),
+            "points": len(rows), "from": start, "to": stop,
+            "end": rows[-1]["v"] if rows else None,
+            "end_label": rows[-1]["label"] if rows else None,
+            "first_label": rows[0]["label"] if rows else None,
+            "not_this_branch": other,
+            "folds": [float(r["fold"]) for r in rows if r.get("fold") not in (None, "")],
+            "stable_3d": stable_stretches(rows),
+            "unstable_3d_at_start": rows[0].get("unstable_3d") if rows else None,
+            "bifurcations": [{"m": b["m"], "v": b["v"], "unstable": b["unstable"],
+                              "located": b["located"], "between": b["between"]}
+                             for b in forks],
+            "seconds": round(sum(float(r.get("seconds") or 0.0) for r in rows), 1)})
     extrapolated = []
     for seed, _, _, _ in branches:
         series = {}
         for row in (t for t in table if t["branch"] == seed):
             seen = {}
+            where = "window" if row["n"] else "branch"
             for b in row["bifurcations"]:
                 k = seen.get(b["m"], 0)
                 seen[b["m"]] = k + 1
-                series.setdefault((b["m"], k), {})[row["eps"]] = b["v"]
-        for (m, k), at in sorted(series.items()):
-            entry = {"branch": seed, "m": m, "k": k, "at": {f"{e:g}": v for e, v in at.items()},
+                series.setdefault((where, b["m"], k), {})[row["eps"]] = b["v"]
+        for (where, m, k), at in sorted(series.items()):
+            entry = {"branch": seed, "run": where, "m": m, "k": k,
+                     "at": {f"{e:g}": v for e, v in at.items()},
                      "extrapolated": None, "order": None}
             if len(at) >= 2:
                 eps_sorted = sorted(at)
@@ -173,34 +200,35 @@ def draw(path: Path, curves: dict, result: dict) -> None:
 
     from fem_ade.render import save_figure
 
-    seeds = list(dict.fromkeys(b["branch"] for b in result["branches"]))
     colours = {"prolate": "tab:blue", "oblate": "tab:orange", "stomatocyte": "tab:green"}
     fig, axes = plt.subplots(1, len(result["eps"]), figsize=(5.2 * len(result["eps"]), 4.4),
                              squeeze=False, sharey=True)
     for ax, eps in zip(axes[0], result["eps"], strict=True):
-        for seed in seeds:
-            pts = curves.get((seed, eps), [])
+        for row in (b for b in result["branches"] if b["eps"] == eps):
+            seed, window = row["branch"], bool(row["n"])
+            pts = curves.get((seed, eps, row["n"]), [])
+            colour = "k" if window else colours.get(seed, "k")
             for (v0, e0, u0), (v1, e1, u1) in zip(pts, pts[1:], strict=False):
                 ok = u0 == 0 and u1 == 0
-                ax.plot([v0, v1], [e0, e1], "-" if ok else "--",
-                        color=colours.get(seed, "k"), lw=2.0 if ok else 1.0)
+                ax.plot([v0, v1], [e0, e1], "-" if ok else "--", color=colour,
+                        lw=(1.2 if window else 2.0) if ok else 1.0)
             if pts:
-                ax.plot([], [], color=colours.get(seed, "k"), label=seed)
-            row = next((b for b in result["branches"]
-                        if b["branch"] == seed and b["eps"] == eps), None)
-            for b in row["bifurcations"] if row else []:
-                e_at = _e_at(pts, b["v"])
+                ax.plot([], [], color=colour, label=(f"{seed}, {row['nodes_per_eps']:g} "
+                                                     "nodes per ε" if window else seed))
+            for b in row["bifurcations"]:
+                e_at = _e_at(pts[b["between"][0]:b["between"][1] + 1], b["v"])
                 if e_at is not None:
-                    ax.plot([b["v"]], [e_at], "D", mfc="none", mec="k", ms=6)
+                    ax.plot([b["v"]], [e_at], "D", mfc="k" if window else "none", mec="k",
+                            ms=6)
                     ax.annotate(f"m={b['m']}", (b["v"], e_at), textcoords="offset points",
-                                xytext=(3, 5), fontsize=7)
+                                xytext=(3, -11 if window else 5), fontsize=7)
         ax.set(xlabel="v", title=f"ε = {eps:g}: solid stable in 3D, dashed not; ◇ bifurcation")
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("e = W / W_sphere")
     for ax in axes[0]:
         ax.legend(fontsize=8)
     fig.tight_layout()
-    save_figure(fig, path, dpi=100, colours=48)
+    save_figure(fig, path, dpi=100, colours=96)  # 48 merged the short green line into grey
     plt.close(fig)
 
 
@@ -214,16 +242,19 @@ def _e_at(pts, v):
 def write_report(out: Path, result: dict, suffix: str = "") -> None:
     lines = ["# Is it stable in 3D? The minimal model's branches in every azimuthal mode", "",
              "Written by `studies/azimuthal.py`: each branch followed down in v by "
-             "`fem_ade.branch` (axisymmetric, order 8, 2.5 nodes per ε, Newton on every "
-             f"point) with the azimuthal modes m = 0 … {result['modes']} at every point "
+             "`fem_ade.branch` (axisymmetric, order 8, Newton on every point) with the "
+             f"azimuthal modes m = 0 … {result['modes']} at every point "
              "(`fem_ade.fem.modes`: the lowest eigenvalue of each block, the unstable count "
              "from the LU's inertia; docs/model.md §13). Stable in 3D: no unstable "
              "direction in any block (m ≥ 1 counted twice). A bifurcation: a block's "
              "unstable count changes between two points (its v where the block's lowest "
              "eigenvalue crosses zero; `*` where that is not the crossing eigenvalue, the "
-             "midpoint).", "",
-             "| branch | R₀ | ε | points | from → end (label) | folds | stable in 3D (v) | "
-             "bifurcations (m at v) | s |", "|---|---|---|---|---|---|---|---|---|"]
+             "midpoint). Whole branches at the default resolution (2.5 nodes per ε: E to "
+             "~1e-5, but the eigenvalues near a bifurcation not resolved); windows around "
+             f"the bifurcations at {WINDOW_NODES_PER_EPS:g} nodes per ε.", "",
+             "| branch | R₀ | ε | nodes per ε | points | from → end (label) | folds | "
+             "stable in 3D (v) | bifurcations (m at v) | s |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for b in result["branches"]:
         stretch = ", ".join(f"{a:.4f} → {z:.4f}" for a, z in b["stable_3d"]) or "nowhere"
         forks = ", ".join(f"m = {f['m']} at {f['v']:.4f}" + ("" if f["located"] else "*")
@@ -235,21 +266,24 @@ def write_report(out: Path, result: dict, suffix: str = "") -> None:
             stretch = forks = (f"its seed relaxed into a {b['first_label']}: not this "
                                "branch, set aside")
         folds = ", ".join(f"{x:.4f}" for x in b["folds"]) or "—"
-        lines.append(f"| {b['branch']} | {b['R0']:g} | {b['eps']:g} | {b['points']} | {end} | "
-                     f"{folds} | {stretch} | {forks} | {b['seconds']:.0f} |")
+        nodes = "2.5" if b["n"] is None else f"{b['nodes_per_eps']:g} (window)"
+        lines.append(f"| {b['branch']} | {b['R0']:g} | {b['eps']:g} | {nodes} | {b['points']} "
+                     f"| {end} | {folds} | {stretch} | {forks} | {b['seconds']:.0f} |")
     lines += ["", "## The bifurcations as ε → 0", "",
-              "Each bifurcation of a branch, by its mode m and its order k along the branch "
-              "(from the start), at each ε; extrapolated by Richardson over the two smallest "
-              "ε with p = 2 assumed (observed where three ε give one).", "",
-              "| branch | m | k | " + " | ".join(f"ε = {e:g}" for e in result["eps"])
-              + " | ε → 0 | p |", "|---|---|---|" + "---|" * (len(result["eps"]) + 2)]
+              "Each bifurcation of a branch (whole, or its windows), by its mode m and its "
+              "order k along the run (from its start), at each ε; extrapolated by "
+              "Richardson over the two smallest ε with p = 2 assumed (observed where three "
+              "ε give one in [0.5, 6]).", "",
+              "| branch | run | m | k | " + " | ".join(f"ε = {e:g}" for e in result["eps"])
+              + " | ε → 0 | p |", "|---|---|---|---|" + "---|" * (len(result["eps"]) + 2)]
     for f in result["bifurcations"]:
         cells = [f"{f['at'][f'{e:g}']:.4f}" if f"{e:g}" in f["at"] else "—"
                  for e in result["eps"]]
         ext = "—" if f["extrapolated"] is None else f"{f['extrapolated']:.4f}"
         p = "—" if f["extrapolated"] is None else ("2 (assumed)" if f["order"] is None
                                                    else f"{f['order']:.2f}")
-        lines.append(f"| {f['branch']} | {f['m']} | {f['k']} | " + " | ".join(cells)
+        lines.append(f"| {f['branch']} | {f['run']} | {f['m']} | {f['k']} | "
+                     + " | ".join(cells)
                      + f" | {ext} | {p} |")
     lines += ["", f"![e along the branches, stable in 3D or not](azimuthal{suffix}.png)", ""]
     notes = out / f"azimuthal{suffix}_notes.md"

@@ -25,9 +25,9 @@ resumable, as a sweep is: a finished branch is read back, a stopped one goes on.
     python studies/branches.py --quick                         # the code (a minute)
     python studies/branches.py --out studies/results --report-only
 
-Its time is the ε = 0.005 prolate's (42 points from v = 0.70 to 0.645): at today's code a
-point there takes ~2.5 min, 119 s of it the stability (measured 2026-12-03; the branches at
-ε = 0.02 and 0.01 take 6–300 s each), so ~2 h on 2 cores.
+Its time is the ε = 0.005 prolate's (42 points from v = 0.70 to 0.645): a point there took
+~2.5 min, 119 s of it the stability, before the direct solver (measured 2026-12-03); with it
+~12.5 s with the m = 0 stability (`studies/results/solver_bench.json`), so ~10 min.
 
 One thread: ``OPENBLAS_NUM_THREADS=1``, ``FEM_ADE_FFT_WORKERS=1`` unless set.
 """

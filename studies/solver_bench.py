@@ -38,7 +38,8 @@ def branch_folder(root: Path, eps: float) -> Path:
     R0, start, stop = CASES[eps]
     out = root / f"prolate-eps={eps:g}"
     scene = vesicle_for_branch({"branch": "prolate", "eps": eps, "R0": R0}, "v", start, stop)
-    follow(scene, param="v", start=start, stop=stop, step=0.005, out=out, quiet=True,
+    step = min(0.005, round(abs(start - stop), 12))  # a step within the branch's span
+    follow(scene, param="v", start=start, stop=stop, step=step, out=out, quiet=True,
            stable=False, max_points=3)
     return out
 
