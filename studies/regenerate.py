@@ -40,6 +40,7 @@ STEPS = (
     ("branches", ["studies/branches.py", "--out", RESULTS]),
     ("ade_branches", ["studies/ade_branches.py", "--out", RESULTS]),
     ("azimuthal", ["studies/azimuthal.py", "--out", RESULTS]),
+    ("ade_azimuthal", ["studies/ade_azimuthal.py", "--out", RESULTS]),
     ("solver_bench", ["studies/solver_bench.py", "--out", RESULTS]),
     ("nonaxisymmetric", ["studies/nonaxisymmetric.py", "--out", RESULTS, "--eps", "0.02"]),
     ("sweep_scaling", ["studies/sweep_scaling.py", "--out", RESULTS]),
@@ -78,7 +79,10 @@ MEASUREMENTS = {"convergence": "errors and times of each resolution, in one proc
                 "readme_figure": "one run and its picture",
                 "sweep_scaling": "a sweep's wall time on 1 and 2 workers",
                 "solver_bench": "one point's Newton and stability by each solver, in one "
-                                "process"}
+                                "process",
+                "ade_azimuthal": "one point per cell of the ADE plane and its modes, in a "
+                                 "process pool (a one-point branch: a sweep's [branch] has "
+                                 "no max_points)"}
 
 
 def main(argv=None) -> dict:

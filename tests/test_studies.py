@@ -363,6 +363,16 @@ def check_azimuthal(result, out):
     assert "m = 2 at" in text and (out / "azimuthal_quick.png").is_file()
 
 
+def check_ade_azimuthal(result, out):
+    """Two cells at ε = 0.04 with m ≤ 3: each made at its (v, Δa₀) as its branch, its
+    lowest eigenvalue and its m in the report; the oblate at v = 0.9 is stable in 3D."""
+    oblate, prolate = result["cells"]
+    assert oblate["same"] and prolate["same"] and oblate["unstable_3d"] == 0
+    assert oblate["lowest_m"] in range(4) and prolate["lowest"] is not None
+    text = (out / "ade_azimuthal_quick.md").read_text()
+    assert "Of 2 cells: 2 made" in text and (out / "ade_azimuthal_quick.png").is_file()
+
+
 def check_solver_bench(result, out):
     """At ε = 0.04: one continuation point by both solvers to the same energy, the m = 0
     block by both eigen-solvers to 1e-8, every time positive."""
@@ -497,7 +507,8 @@ def test_package_verdicts_are_the_committed_gallerys():
 #: that made it; phase_diagram's (30 s of sharp solves) runs with -m slow
 REPORTS = {"constraints_study": [], "sharp_limit": [], "gallery": [], "ade_plane": [],
            "axisymmetric": [], "nonaxisymmetric": ["--eps", "0.02"], "eps_ladder": [],
-           "phase_diagram": [], "branches": [], "ade_branches": [], "azimuthal": []}
+           "phase_diagram": [], "branches": [], "ade_branches": [], "azimuthal": [],
+           "ade_azimuthal": []}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
@@ -567,9 +578,9 @@ def test_report_comparison_keeps_meaning_and_catches_stale_reports():
 
 
 def test_committed_results_stay_under_6_mb():
-    """A clone carries the results a reader needs, not bulk run data (≤ 6 MB in all: 5.05 MB
-    with the azimuthal study's nine branch tables, 2026-12-04; one run folder's final.npz is
-    1-20 MB)."""
+    """A clone carries the results a reader needs, not bulk run data (≤ 6 MB in all: 5.18 MB
+    with the azimuthal study's nine branch tables and the ADE plane's 64 cells, 2026-12-04;
+    one run folder's final.npz is 1-20 MB)."""
     import subprocess
 
     root = STUDIES.parent

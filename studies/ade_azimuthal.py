@@ -1,0 +1,260 @@
+"""Is the ADE plane's lowest shape stable in 3D? (issue 43) At each point of the 8 × 8
+(v, Δa₀) grid at κ̄/κ = 1.4 and ε = 0.01, the lowest genus-0 branch of the phase field
+there (``studies/results/ade_branches.json``: the lowest of the prolate, pear, oblate and
+stomatocyte; the torus is left out, a phase-field competitor that a membrane does not reach
+by a smooth change) is made at that point — its seed made steady by Newton, the first point
+of ``fem_ade.branch`` in Δa₀ (axisymmetric, order 8, the default 2.5 nodes per ε, the line's
+R₀) — and its stability taken in every azimuthal mode m = 0 … 8 (``fem_ade.fem.modes``).
+
+A cell is unstable where a block's lowest eigenvalue is below −0.5 (ε/R₀)⁴ (m = 0: within
+axisymmetry already; m ≥ 1: in 3D only); it is marginal where its lowest eigenvalue over all
+blocks lies within ±0.5 (ε/R₀)⁴ of zero, which the default resolution does not resolve
+(``azimuthal_notes.md``: at 2.5 nodes per ε an eigenvalue near zero was off by up to 0.4
+(ε/R₀)⁴); the count below the branch's own threshold (−0.025 (ε/R₀)⁴,
+``fem_ade.stability.threshold``) is kept beside it. A cell whose seed relaxes into another
+shape says so.
+
+Writes ``OUT/ade_azimuthal.md`` (the grid: each cell's branch, its 3D count and the modes
+of its unstable directions; the hand-written ``OUT/ade_azimuthal_notes.md``),
+``OUT/ade_azimuthal.json`` and ``OUT/ade_azimuthal.png``; each cell's folder
+``OUT/ade_azimuthal/v=V_da0=D`` (a one-point branch; its ``points/`` are not committed).
+A cell whose folder holds its point is not made again; ``--report-only`` makes nothing.
+
+    python studies/ade_azimuthal.py --out studies/results          # ~10 min on 2 cores
+    python studies/ade_azimuthal.py --quick                        # the code (a minute)
+
+One thread per worker: ``OPENBLAS_NUM_THREADS=1``, ``FEM_ADE_FFT_WORKERS=1`` unless set.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+OUT = Path("runs") / "studies"
+PLANE = Path(__file__).resolve().parent / "results" / "ade_branches.json"
+#: the genus-0 branches (the torus left out)
+GENUS0 = ("prolate", "pear", "oblate", "stomatocyte")
+MODES, KBAR = 8, 1.4
+#: a cell is marginal where its lowest eigenvalue is within this many (ε/R₀)⁴ of zero
+MARGINAL = 0.5
+#: the quick cells: (v, Δa₀, branch, R₀) at ε = 0.04, modes m ≤ 3
+QUICK = [(0.9, 0.8, "oblate", 0.25), (0.85, 1.16, "prolate", 0.2)]
+QUICK_EPS, QUICK_MODES = 0.04, 3
+
+
+def lowest_genus0(energies: dict) -> str | None:
+    """The branch of least e among the genus-0 ones that have a value."""
+    found = {b: e for b, e in energies.items() if b in GENUS0 and e is not None}
+    return min(found, key=found.get) if found else None
+
+
+def cells(plane: dict) -> list[dict]:
+    """Each grid point with its phase-field and sharp genus-0 lowest branches and R₀."""
+    return [{"v": p["v"], "da0": p["da0"], "branch": lowest_genus0(p["e_pf"]),
+             "sharp": lowest_genus0(p["e_sharp"]), "lowest_any": p["pf"],
+             "R0": plane["R0"][f"{p['v']:g}"], "eps": plane["eps"]} for p in plane["points"]]
+
+
+def cell_name(cell: dict) -> str:
+    return f"v={cell['v']:g}_da0={cell['da0']:g}"
+
+
+def scene_of(cell: dict):
+    """The seed of the cell's branch at its (v, Δa₀): the vesicle family's (the pear's as
+    the ADE-lines study makes it)."""
+    if cell["branch"] == "pear":
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from ade_branches import pear_scene
+
+        return pear_scene(cell["v"], cell["da0"], cell["eps"], cell["R0"])
+    from fem_ade.scenes import vesicle_scene
+
+    return vesicle_scene(v=cell["v"], da0=cell["da0"], kbar=KBAR, eps=cell["eps"],
+                         R0=cell["R0"], branch=cell["branch"])
+
+
+def make_cell(args) -> str | None:
+    """The cell's point and its modes (a one-point branch in Δa₀); None, or why not."""
+    cell, folder, modes = args
+    from fem_ade.branch import follow
+    from fem_ade.model import ModelError
+
+    try:
+        follow(scene_of(cell), param="da0", start=cell["da0"], stop=cell["da0"] - 0.002,
+               step=0.002, out=folder, quiet=True, max_points=1, modes=modes)
+    except (ModelError, ArithmeticError) as err:
+        return f"{type(err).__name__}: {err}"
+    return None
+
+
+def summarize(root: Path, todo: list[dict], modes: int) -> dict:
+    """Per cell: the shape its point is, its 3D unstable count, the modes below the
+    threshold, its lowest eigenvalue in units of (ε/R₀)⁴ and whether that is marginal."""
+    from fem_ade.branch import read_table, same_branch
+    from fem_ade.stability import UNSTABLE
+
+    out = []
+    for cell in todo:
+        folder = root / cell_name(cell)
+        rows = read_table(folder) if (folder / "branch.csv").is_file() else []
+        entry = {**cell, "label": None, "same": None, "unstable_3d": None, "modes_below": [],
+                 "lowest": None, "lowest_m": None, "marginal": None}
+        failed = folder / "failed.txt"
+        entry["failed"] = failed.read_text().strip() if failed.is_file() else None
+        if rows:
+            r = rows[0]
+            scale = (cell["eps"] / cell["R0"]) ** 4
+            lows = {m: float(r[f"lowest_m{m}"]) for m in range(modes + 1)
+                    if r.get(f"lowest_m{m}") not in (None, "")}
+            m_low = min(lows, key=lows.get)
+            entry.update(label=r["label"], same=same_branch(cell["branch"], r["label"]),
+                         unstable_3d=r.get("unstable_3d"),
+                         below_threshold=[m for m, x in lows.items() if x < UNSTABLE * scale],
+                         modes_below=[m for m, x in lows.items() if x < -MARGINAL * scale],
+                         lowest=lows[m_low] / scale, lowest_m=m_low,
+                         marginal=abs(lows[m_low]) < MARGINAL * scale,
+                         e=r["e"], seconds=r.get("seconds"))
+        out.append(entry)
+    return {"modes": modes, "marginal": MARGINAL, "cells": out}
+
+
+def write_report(out: Path, result: dict, suffix: str) -> None:
+    cells_ = result["cells"]
+    done = [c for c in cells_ if c["label"] is not None]
+    unstable = [c for c in done if c["same"] and c["modes_below"]]
+    axisym = [c for c in unstable if 0 in c["modes_below"]]
+    marginal = [c for c in done if c["same"] and c["marginal"]]
+    other = [c for c in done if not c["same"]]
+    lines = ["# Is the ADE plane's lowest shape stable in 3D?", "",
+             "Written by `studies/ade_azimuthal.py`: at each point of the (v, Δa₀) grid "
+             "(κ̄/κ = 1.4, ε = "
+             f"{cells_[0]['eps'] if cells_ else '—'}), the phase field's lowest genus-0 "
+             "branch (the torus left out; `ade_branches.json`) made at that point by Newton "
+             f"from its seed, and its stability in every azimuthal mode m = 0 … "
+             f"{result['modes']} (2.5 nodes per ε). ✕: unstable (the modes m whose lowest "
+             f"eigenvalue is below −{MARGINAL:g} (ε/R₀)⁴; m = 0 within axisymmetry already); "
+             f"~: marginal, its lowest eigenvalue within ±{MARGINAL:g} (ε/R₀)⁴ of zero, which "
+             "this resolution does not resolve; ≠: the seed relaxed into another shape; "
+             "blank: stable in 3D.", "",
+             f"Of {len(cells_)} cells: {len(done)} made; {len(unstable)} unstable "
+             f"({len(axisym)} of them in m = 0, {len(unstable) - len(axisym)} in m ≥ 1 "
+             f"only); {len(marginal)} marginal; {len(other)} relaxed into another shape.", ""]
+    v_list = sorted({c["v"] for c in cells_})
+    da_list = sorted({c["da0"] for c in cells_})
+    lines += ["| v \\ Δa₀ | " + " | ".join(f"{d:g}" for d in da_list) + " |",
+              "|---|" + "---|" * len(da_list)]
+    for v in reversed(v_list):
+        row = []
+        for d in da_list:
+            c = next((x for x in cells_ if x["v"] == v and x["da0"] == d), None)
+            row.append(_cell_text(c))
+        lines.append(f"| {v:g} | " + " | ".join(row) + " |")
+    lines += ["", "Each cell: the genus-0 lowest branch (sharp's in brackets where it differs), "
+              "its mark, and its lowest eigenvalue over the blocks in units of (ε/R₀)⁴ with "
+              "its m.", "",
+              f"![the ADE plane's genus-0 lowest shapes in 3D](ade_azimuthal{suffix}.png)", ""]
+    notes = out / f"ade_azimuthal{suffix}_notes.md"
+    if notes.is_file():
+        lines += [notes.read_text().rstrip(), ""]
+    (out / f"ade_azimuthal{suffix}.md").write_text("\n".join(lines))
+
+
+def _cell_text(c: dict | None) -> str:
+    if c is None or c["branch"] is None:
+        return "—"
+    name = c["branch"] + (f" ({c['sharp']})" if c["sharp"] != c["branch"] else "")
+    if c["label"] is None:
+        return f"{name}: not made" + (f" ({c['failed'][:40]})" if c.get("failed") else "")
+    if not c["same"]:
+        return f"{name} ≠ {c['label']}"
+    mark = (f" ✕ m = {', '.join(map(str, c['modes_below']))}" if c["modes_below"]
+            else " ~" if c["marginal"] else "")
+    return f"{name}{mark}, {c['lowest']:.2g} (m = {c['lowest_m']})"
+
+
+def draw(path: Path, result: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fem_ade.render import save_figure
+
+    colours = {"prolate": "tab:blue", "pear": "tab:purple", "oblate": "tab:orange",
+               "stomatocyte": "tab:green"}
+    fig, ax = plt.subplots(figsize=(8.4, 5.6))
+    for c in result["cells"]:
+        if c["branch"] is None:
+            continue
+        ax.scatter([c["da0"]], [c["v"]], s=260, color=colours.get(c["branch"], "grey"),
+                   alpha=0.35 if c["label"] is None or not c["same"] else 0.9)
+        if c["label"] is None:
+            continue
+        mark = ("≠" if not c["same"] else "✕" if c["modes_below"]
+                else "~" if c["marginal"] else "")
+        if mark:
+            ax.annotate(mark, (c["da0"], c["v"]), ha="center", va="center", fontsize=13)
+        if c["same"] and c["modes_below"]:
+            ax.annotate("m=" + ",".join(map(str, c["modes_below"])), (c["da0"], c["v"]),
+                        textcoords="offset points", xytext=(0, -16), ha="center",
+                        fontsize=7)
+    for name, colour in colours.items():
+        ax.scatter([], [], s=80, color=colour, label=name)
+    ax.set(xlabel="Δa₀", ylabel="v", title="genus-0 lowest (phase field, ε = 0.01): "
+           "✕ unstable, ~ marginal, ≠ relaxed")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=100, colours=128)
+    plt.close(fig)
+
+
+def main(argv=None) -> dict:
+    from fem_ade.output import write_json_atomic
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--quick", action="store_true", help="two cells at ε = 0.04, m ≤ 3")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--report-only", action="store_true")
+    args = ap.parse_args(argv)
+    suffix = "_quick" if args.quick else ""
+    if args.quick:
+        todo = [{"v": v, "da0": d, "branch": b, "sharp": b, "lowest_any": b, "R0": R0,
+                 "eps": QUICK_EPS} for v, d, b, R0 in QUICK]
+        modes = QUICK_MODES
+    else:
+        todo = cells(json.loads(PLANE.read_text()))
+        modes = MODES
+    root = args.out / f"ade_azimuthal{suffix}"
+    if not args.report_only:
+        jobs = [(c, root / cell_name(c), modes) for c in todo
+                if c["branch"] is not None and not (root / cell_name(c) / "branch.csv").is_file()]
+        inline = args.quick or args.workers <= 1  # (the quick cells: in this process)
+        with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
+            made = map(make_cell, jobs) if inline else pool.map(make_cell, jobs)
+            for (cell, folder, _), why in zip(jobs, made, strict=True):
+                if why:
+                    folder.mkdir(parents=True, exist_ok=True)
+                    (folder / "failed.txt").write_text(why + "\n")
+                print(f"  {cell_name(cell)} ({cell['branch']}): {why or 'done'}", flush=True)
+    result = summarize(root, todo, modes)
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(args.out / f"ade_azimuthal{suffix}.json", result)
+    draw(args.out / f"ade_azimuthal{suffix}.png", result)
+    write_report(args.out, result, suffix)
+    print(f"wrote {args.out / f'ade_azimuthal{suffix}.md'}")
+    return result
+
+
+if __name__ == "__main__":
+    main()
