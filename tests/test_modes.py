@@ -166,6 +166,17 @@ def test_a_spheres_modes_are_its_multiplets(monkeypatch):
     assert not _multiplets_hold(sys_, lin)
 
 
+def _oblate(tmp_path, modes: int):
+    """The oblate at ε = 0.04, v = 0.85, R₀ = 0.25 (its m = 2 block has one negative
+    eigenvalue): the first point of a branch with ``modes``, its backend."""
+    out = tmp_path / "oblate"
+    assert branch_main(["vesicle", "--branch", "oblate", "--eps", "0.04", "--R0", "0.25",
+                        "--param", "v", "--from", "0.85", "--to", "0.84", "--step", "0.01",
+                        "--quiet", "--modes", str(modes), "--out", str(out)]) == 0
+    be, _ = load_state(out / "points" / "0000")
+    return be
+
+
 def _revolve(ax, scene):
     """An axisymmetric state revolved into 3D (order 8, 64³ nodes: the same spacing as the
     axisymmetric mesh's fine zone at ε = 0.04) and made steady there by Newton."""
@@ -210,11 +221,7 @@ def test_the_oblates_saddle_is_one_in_3d(tmp_path):
     and its next four are the blocks' to 1e-3 (measured: 1.6e-4). The pair is split by the
     cubic mesh, which tells cos 2θ (along its axes) from sin 2θ (along its diagonals):
     measured −4.602e-4 and −4.579e-4 against the block's −4.584e-4, their mean 0.14 % off."""
-    out = tmp_path / "oblate"
-    assert branch_main(["vesicle", "--branch", "oblate", "--eps", "0.04", "--R0", "0.25",
-                        "--param", "v", "--from", "0.85", "--to", "0.84", "--step", "0.01",
-                        "--quiet", "--modes", "0", "--out", str(out)]) == 0
-    ax, _ = load_state(out / "points" / "0000")
+    ax = _oblate(tmp_path, modes=0)
     blocks = axisymmetric(ax, range(6), 6)
     assert blocks.unstable == {0: 0, 1: 0, 2: 1, 3: 0, 4: 0, 5: 0}
     union = sorted(x for m, vals in blocks.modes.items()
@@ -247,11 +254,7 @@ def test_the_zero_modes_are_taken_out(prolate, monkeypatch):
 def test_the_inertia_counts_what_the_eigensolve_finds(tmp_path):
     """The count below the threshold from the LU's inertia equals the number of computed
     eigenvalues below it, on an oblate at ε = 0.04 whose m = 2 block has one (v = 0.85)."""
-    out = tmp_path / "oblate"
-    assert branch_main(["vesicle", "--branch", "oblate", "--eps", "0.04", "--R0", "0.25",
-                        "--param", "v", "--from", "0.85", "--to", "0.84", "--step", "0.01",
-                        "--quiet", "--modes", "3", "--out", str(out)]) == 0
-    be, _ = load_state(out / "points" / "0000")
+    be = _oblate(tmp_path, modes=3)
     from fem_ade.stability import threshold
 
     result = axisymmetric(be, range(4), 3)
