@@ -344,17 +344,6 @@ def stability(be, k: int = EIGENVALUES) -> np.ndarray:
     return np.asarray(cartesian(be, k).eigenvalues)
 
 
-def translation(be) -> np.ndarray:
-    """t = ∂φ/∂z at the nodes of an axisymmetric backend's state: the mode of a translation
-    along the axis (the spectral elements' derivative, the mean of two cells' at a shared
-    node)."""
-    from .fem.tensor import along
-
-    space = be.space
-    assert not space.axes[1].radial  # (r, z): the second axis is the axis' direction
-    return along(space.axes[1].derivative, be.phi.reshape(space.shape), 1).ravel()
-
-
 # ---------------------------------------------------------------------------------------------
 # the branch folder
 # ---------------------------------------------------------------------------------------------

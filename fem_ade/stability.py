@@ -45,11 +45,17 @@ from .model import ModelError
 UNSTABLE = -0.025
 
 
+def shape_scale(eps: float, R0: float) -> float:
+    """(ε/R₀)⁴: the scale of the shape modes' eigenvalues in units of P."""
+    return (eps / R0) ** 4
+
+
 def threshold(params) -> float:
     """The eigenvalue (in units of P) below which a direction of a state with ``params``
     counts as unstable: :data:`UNSTABLE`·(ε/R₀)⁴, R₀ = √(β/4π)."""
-    R0 = math.sqrt(params.beta / (4.0 * math.pi))
-    return UNSTABLE * (params.eps / R0) ** 4
+    return UNSTABLE * shape_scale(params.eps, math.sqrt(params.beta / (4.0 * math.pi)))
+
+
 #: the modes and eigenvalues per mode the command line computes by default
 MODES, EIGENVALUES = 8, 4
 #: where the directions off the constraints' tangent space are put in the 3D operator

@@ -100,7 +100,7 @@ def summarize(root: Path, todo: list[dict], modes: int) -> dict:
     """Per cell: the shape its point is, its 3D unstable count, the modes below the
     threshold, its lowest eigenvalue in units of (ε/R₀)⁴ and whether that is marginal."""
     from fem_ade.branch import read_table, same_branch
-    from fem_ade.stability import UNSTABLE
+    from fem_ade.stability import UNSTABLE, shape_scale
 
     out = []
     for cell in todo:
@@ -112,7 +112,7 @@ def summarize(root: Path, todo: list[dict], modes: int) -> dict:
         entry["failed"] = failed.read_text().strip() if failed.is_file() else None
         if rows:
             r = rows[0]
-            scale = (cell["eps"] / cell["R0"]) ** 4
+            scale = shape_scale(cell["eps"], cell["R0"])
             lows = {m: float(r[f"lowest_m{m}"]) for m in range(modes + 1)
                     if r.get(f"lowest_m{m}") not in (None, "")}
             m_low = min(lows, key=lows.get)

@@ -101,12 +101,10 @@ class NewtonSystem:
             raise ModelError("Newton's method needs a tensor mesh (its preconditioner is the "
                              "fast diagonalization)")
         self.be, self.space, self.step = be, space, be.stepper
-        p = be.params
         self.w = space.weights
         basis = be.stepper.eigenbasis or Eigenbasis(space, False)
         self.basis = basis
-        P = StepMatrix(4.0 * p.kappa / p.eps**3, 4.0 * p.kappa / p.eps, p.kappa * p.eps)
-        self.P_inverse_symbol = basis.inverse(P)
+        self.P_inverse_symbol = basis.inverse(StepMatrix(*self.bulk()))
         self.translations = self._translations()
         if linear not in LINEAR_SOLVERS:
             raise ModelError(f"the Newton system's solver must be one of "

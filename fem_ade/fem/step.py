@@ -136,20 +136,22 @@ class MixedStep:
         G″·(∇ΔA·v)∇ΔA included; the penalties' terms where their effects are on."""
         p = self.params
         mu_v = self.space.laplacian(v)
-        a, c = self.hessian_parts(phi, mu, Kphi, v, mu_v)
+        values = self.values(phi, mu, Kphi)
+        a, c = self.hessian_parts(phi, mu, v, mu_v, values)
         Hv = self.K @ (a - (2.0 * p.kappa / p.eps) * v + (p.kappa * p.eps) * mu_v) \
             + self.w * c
-        for sigma, b in self.rank_one(phi, mu, Kphi, *self.values(phi, mu, Kphi)):
+        for sigma, b in self.rank_one(phi, mu, Kphi, *values):
             Hv = Hv + sigma * _dot(b, v) * b  # the functionals' slopes
         return Hv
 
-    def hessian_parts(self, phi, mu, Kphi, v, mu_v):
+    def hessian_parts(self, phi, mu, v, mu_v, values):
         """(a′, c′): the nodal products of the linearized explicit terms along (v, μ_v) —
-        ∇²E_h v = K(a′ − (2κ/ε)v + κε μ_v) + W c′ + the rank-one terms. Pointwise and linear
-        in (v, μ_v), so evaluated at v = 1, μ_v = 0 and at v = 0, μ_v = 1 they are the
-        coefficients of :meth:`hessian_coefficients`."""
+        ∇²E_h v = K(a′ − (2κ/ε)v + κε μ_v) + W c′ + the rank-one terms — at φ whose
+        :meth:`values` are ``values``. Pointwise and linear in (v, μ_v), so evaluated at
+        v = 1, μ_v = 0 and at v = 0, μ_v = 1 they are the coefficients of
+        :meth:`hessian_coefficients`."""
         p = self.params
-        A, dA, V = self.values(phi, mu, Kphi)
+        A, dA, V = values
         a, c = forms.bending_explicit_linear(phi, mu, v, mu_v, kappa=p.kappa, eps=p.eps,
                                              C=p.C_eff)
         if dA is not None:
@@ -176,8 +178,9 @@ class MixedStep:
         area terms' constant multiples of K) and ``rank_one`` [(σ, b)]."""
         p = self.params
         ones, zeros = np.ones_like(phi), np.zeros_like(phi)
-        a1, c1 = self.hessian_parts(phi, mu, Kphi, ones, zeros)
-        a2, c2 = self.hessian_parts(phi, mu, Kphi, zeros, ones)
+        values = self.values(phi, mu, Kphi)
+        a1, c1 = self.hessian_parts(phi, mu, ones, zeros, values)
+        a2, c2 = self.hessian_parts(phi, mu, zeros, ones, values)
         a1, c1, a2, c2 = (np.broadcast_to(x, phi.shape).astype(float) for x in (a1, c1, a2, c2))
         # a′ = s v + α v (s: the constant multiple of v, the area terms'), c′ = γ v + α μ_v
         s = a1 - c2
@@ -190,7 +193,7 @@ class MixedStep:
             c0 += lam_A * sa
             gamma = gamma + lam_A * ca
         return {"alpha": c2, "gamma": gamma, "c0": c0,
-                "rank_one": self.rank_one(phi, mu, Kphi, *self.values(phi, mu, Kphi))}
+                "rank_one": self.rank_one(phi, mu, Kphi, *values)}
 
     def constraint_hessian_vector(self, phi, Kphi, v, lam_V, lam_A) -> np.ndarray:
         """(λ_V ∇²V_h + λ_A ∇²A_h) v: the exact constraints' part of the Lagrangian's
