@@ -1,8 +1,9 @@
 """fem_ade: phase-field vesicle membranes with area-difference elasticity.
 
 A mixed (φ, μ) periodic finite-element backend and a Fourier-spectral reference share one
-scene catalogue (:mod:`fem_ade.scenes`), one time loop (:mod:`fem_ade.loop`) and one run
-folder (:mod:`fem_ade.runs`, whose :func:`simulate` is the Python API behind the CLI).
+scene catalogue (:mod:`fem_ade.scenes.catalogue`), one time loop (:mod:`fem_ade.engine.loop`)
+and one run folder (:mod:`fem_ade.engine.runs`, whose :func:`simulate` is the Python API
+behind the CLI). docs/architecture.md says which subpackage is which layer.
 """
 
 import importlib
@@ -10,9 +11,10 @@ import importlib
 __version__ = "0.1.0"
 
 #: name -> module: imported on first use, so that ``python -m fem_ade.run`` starts light
-_LAZY = {"EFFECTS": "model", "ModelError": "model", "Params": "model", "SCENES": "scenes",
-         "Scene": "scenes", "get_scene": "scenes", "load_scene_file": "scenes",
-         "resume": "runs", "simulate": "runs"}
+_LAZY = {"EFFECTS": "model.params", "ModelError": "model.params", "Params": "model.params",
+         "SCENES": "scenes.catalogue", "Scene": "scenes.catalogue",
+         "get_scene": "scenes.catalogue", "load_scene_file": "scenes.catalogue",
+         "resume": "engine.runs", "simulate": "engine.runs"}
 
 __all__ = [*_LAZY, "__version__"]
 

@@ -1,6 +1,6 @@
 """One registry of what a run is made of: backends (with their options), schemes, constraints.
 
-The command line builds its choices from here, :func:`fem_ade.backend.make_backend` finds
+The command line builds its choices from here, :func:`fem_ade.backends.base.make_backend` finds
 backends here, and the tests iterate over these tables, so adding an entry is one edit. Data
 only: importing this module imports no backend.
 """
@@ -16,9 +16,9 @@ SCHEMES = {
 }
 
 #: initial-condition variants of a catalogue scene: the two readings of the paper's printed
-#: constant c (docs/model.md §7), and "seeded", the paper's figure's shape (fem_ade.seeds)
+#: constant c (docs/model.md §7), and "seeded", the paper's figure's shape (fem_ade.scenes.seeds)
 IC_VARIANTS = ("consistent", "printed", "seeded")
-#: the branches a vesicle of the ``vesicle`` scene family can start on (fem_ade.vesicle)
+#: the branches a vesicle of the ``vesicle`` scene family can start on (fem_ade.scenes.vesicle)
 VESICLE_BRANCHES = ("prolate", "oblate", "stomatocyte", "pear", "torus", "sphere")
 
 #: how V = α and A = β are enforced
@@ -50,7 +50,7 @@ RECIPE_SETTINGS = {
                "accelerate": True, "until_steady": 1e-9, "max_steps": 20000},
 }
 
-#: how the FEM step's system is solved (fem_ade.fem.solve): exactly by fast diagonalization
+#: how the FEM step's system is solved (fem_ade.backends.fem.solve): exactly by fast diagonalization
 #: (fdm; fft is fdm where it uses the FFT), or by PCG with an AMG, Chebyshev or Jacobi
 #: preconditioner
 FEM_SOLVERS = ("auto", "fdm", "fft", "amg", "chebyshev", "jacobi")
@@ -100,7 +100,7 @@ class BackendSpec:
 
 BACKENDS = {
     "fem": BackendSpec(
-        "fem", "fem_ade.fem.backend:FEMBackend",
+        "fem", "fem_ade.backends.fem.backend:FEMBackend",
         "mixed (phi, mu) periodic finite elements on hexahedra (quads in 2D)",
         (
             Option("order", int, 1, None,
@@ -134,8 +134,9 @@ BACKENDS = {
                    "axisymmetric: the half-plane R,z0,z1 (r <= R, z0 <= z <= z1; default "
                    "L/sqrt(pi),0,L: the box's volume and height)"),
         ),
-        variants=((("geometry", "axisymmetric"), "fem_ade.fem.axisym:AxisymmetricFEMBackend"),
-                  (("linalg", "petsc"), "fem_ade.fem.petsc:PETScFEMBackend")),
+        variants=((("geometry", "axisymmetric"),
+                   "fem_ade.backends.fem.axisym:AxisymmetricFEMBackend"),
+                  (("linalg", "petsc"), "fem_ade.backends.fem.petsc:PETScFEMBackend")),
     ),
     "spectral": BackendSpec(
         "spectral", "spectral_ref.solver:SpectralBackend",

@@ -5,7 +5,7 @@
 - ``box12_perturbed.vtu``: the uniform nodes moved by a smooth periodic displacement that keeps
   each face in place, so the cells are general (non-affine) hexahedra.
 
-All three have matching nodes on opposite faces, which is what ``fem_ade.fem.mesh.from_file``
+All three have matching nodes on opposite faces, which is what ``fem_ade.backends.fem.mesh.from_file``
 needs to identify them periodically. Run: ``python meshes/make_meshes.py [OUTDIR]``.
 """
 

@@ -2,7 +2,7 @@
 
 Written straight from the formulas, independently of the finite-element physics, so that
 the two backends cross-check each other. It shares with the FEM only the scene catalogue and
-its parameters (the scalar parts of E_M in :class:`fem_ade.model.Params`), and generic code
+its parameters (the scalar parts of E_M in :class:`fem_ade.model.params.Params`), and generic code
 that holds no physics (the backend base with the constraints' target ramp, output meshes):
 its energy terms, forces, stabilization and constraint multipliers are its own.
 
@@ -26,11 +26,11 @@ import math
 import numpy as np
 from scipy import fft
 
-from fem_ade.backend import BackendBase
-from fem_ade.constraints import ConstraintError
-from fem_ade.model import ModelError
-from fem_ade.threads import fft_workers
-from fem_ade.xdmf import closed_grid_values, grid_mesh
+from fem_ade.backends.base import BackendBase
+from fem_ade.backends.threads import fft_workers
+from fem_ade.model.constraints import ConstraintError
+from fem_ade.model.params import ModelError
+from fem_ade.store.xdmf import closed_grid_values, grid_mesh
 
 SQRT2 = math.sqrt(2.0)
 
@@ -188,7 +188,8 @@ def stabilization_symbol(k2, p, s0, s2, dim):
 
 
 class SpectralBackend(BackendBase):
-    """The spectral reference as a backend of :mod:`fem_ade.loop` (see fem_ade.backend)."""
+    """The spectral reference as a backend of :mod:`fem_ade.engine.loop` (see
+    fem_ade.backends.base)."""
 
     name = "spectral"
 
@@ -284,7 +285,7 @@ class SpectralBackend(BackendBase):
 
     def _constrained_update(self, base_hat, solve):
         """φⁿ⁺¹ = base − λ_V P⁻¹g_V − λ_A P⁻¹g_A with V, A at this step's targets (α, β once
-        the ramp is done; fem_ade.constraints)."""
+        the ramp is done; fem_ade.model.constraints)."""
         p, dV, phi, lap = self.params, self.dV, self.phi, self.lap
         if p.localized_volume:
             gV_hat = self._fwd(volume_gradient(phi, p))

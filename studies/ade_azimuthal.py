@@ -3,15 +3,16 @@
 there (``studies/results/ade_branches.json``: the lowest of the prolate, pear, oblate and
 stomatocyte; the torus is left out, a phase-field competitor that a membrane does not reach
 by a smooth change) is made at that point — its seed made steady by Newton, the first point
-of ``fem_ade.branch`` in Δa₀ (axisymmetric, order 8, the default 2.5 nodes per ε, the line's
-R₀) — and its stability taken in every azimuthal mode m = 0 … 8 (``fem_ade.fem.modes``).
+of ``fem_ade.campaigns.branch`` in Δa₀ (axisymmetric, order 8, the default 2.5 nodes per ε, the
+line's
+R₀) — and its stability taken in every azimuthal mode m = 0 … 8 (``fem_ade.backends.fem.modes``).
 
 A cell is unstable where a block's lowest eigenvalue is below −0.5 (ε/R₀)⁴ (m = 0: within
 axisymmetry already; m ≥ 1: in 3D only); it is marginal where its lowest eigenvalue over all
 blocks lies within ±0.5 (ε/R₀)⁴ of zero, which the default resolution does not resolve
 (``azimuthal_notes.md``: at 2.5 nodes per ε an eigenvalue near zero was off by up to 0.4
 (ε/R₀)⁴); the count below the branch's own threshold (−0.025 (ε/R₀)⁴,
-``fem_ade.stability.threshold``) is kept beside it. A cell whose seed relaxes into another
+``fem_ade.campaigns.stability.threshold``) is kept beside it. A cell whose seed relaxes into another
 shape says so.
 
 Writes ``OUT/ade_azimuthal.md`` (the grid: each cell's branch, its 3D count and the modes
@@ -76,7 +77,7 @@ def scene_of(cell: dict):
         from ade_branches import pear_scene
 
         return pear_scene(cell["v"], cell["da0"], cell["eps"], cell["R0"])
-    from fem_ade.scenes import vesicle_scene
+    from fem_ade.scenes.catalogue import vesicle_scene
 
     return vesicle_scene(v=cell["v"], da0=cell["da0"], kbar=KBAR, eps=cell["eps"],
                          R0=cell["R0"], branch=cell["branch"])
@@ -85,8 +86,8 @@ def scene_of(cell: dict):
 def make_cell(args) -> str | None:
     """The cell's point and its modes (a one-point branch in Δa₀); None, or why not."""
     cell, folder, modes = args
-    from fem_ade.branch import follow
-    from fem_ade.model import ModelError
+    from fem_ade.campaigns.branch import follow
+    from fem_ade.model.params import ModelError
 
     try:
         follow(scene_of(cell), param="da0", start=cell["da0"], stop=cell["da0"] - 0.002,
@@ -99,8 +100,8 @@ def make_cell(args) -> str | None:
 def summarize(root: Path, todo: list[dict], modes: int) -> dict:
     """Per cell: the shape its point is, its 3D unstable count, the modes below the
     threshold, its lowest eigenvalue in units of (ε/R₀)⁴ and whether that is marginal."""
-    from fem_ade.branch import read_table, same_branch
-    from fem_ade.stability import UNSTABLE, shape_scale
+    from fem_ade.campaigns.branch import read_table, same_branch
+    from fem_ade.campaigns.stability import UNSTABLE, shape_scale
 
     out = []
     for cell in todo:
@@ -187,7 +188,7 @@ def draw(path: Path, result: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.render import save_figure
+    from fem_ade.plots.render import save_figure
 
     colours = {"prolate": "tab:blue", "pear": "tab:purple", "oblate": "tab:orange",
                "stomatocyte": "tab:green"}
@@ -219,7 +220,7 @@ def draw(path: Path, result: dict) -> None:
 
 
 def main(argv=None) -> dict:
-    from fem_ade.output import write_json_atomic
+    from fem_ade.store.output import write_json_atomic
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=OUT)

@@ -1,6 +1,6 @@
 """The ADE plane from branches (issue 32): at κ̄/κ = 1.4, the lowest branch at each point of
 the 8 × 8 (v, Δa₀) grid of ``studies/sweeps/ade.toml`` and the transition lines, from
-branches followed in Δa₀ along lines of fixed v — the phase field's (``fem_ade.branch``,
+branches followed in Δa₀ along lines of fixed v — the phase field's (``fem_ade.campaigns.branch``,
 axisymmetric, Newton on every point) beside the sharp membrane's (``sharp_ref``, each
 branch continued along a finer m₀ grid).
 
@@ -15,11 +15,11 @@ branch continued along a finer m₀ grid).
 * **Sharp**: each branch solved at an anchor and continued along m₀ = 0.8, 0.84, …, 1.64
   (``studies/ade_plane.py``'s ``follow``) until it is lost.
 * The lowest of all (the torus included) at each grid point, and the transitions along each
-  line: where the lowest branch's e crosses the next one's (``fem_ade.branch.crossing``;
+  line: where the lowest branch's e crosses the next one's (``fem_ade.campaigns.branch.crossing``;
   sharp: linear between the m₀ grid's points — the difference of two branches' e is nearly
   linear in m₀, as each is w + q(da − m₀)² with da slowly varying).
 
-The lines are the points of one branch sweep built from this plan (:mod:`fem_ade.sweep`,
+The lines are the points of one branch sweep built from this plan (:mod:`fem_ade.campaigns.sweep`,
 ``OUT/ade_branches/sweep/points/v=V_LINE``: a Dask task per line, resumable, a line that
 cannot start recorded with its reason; the pear's seed is made here, as its point's own
 scene). As the sweep ends, each line's rows (or why it has none) and its seconds are
@@ -94,7 +94,7 @@ def common_R0(v: float, eps: float, branches, span) -> float:
     the ``vesicle`` family's margin (0.1 L + 2ε) from the unit box's faces."""
     import numpy as np
 
-    from fem_ade.vesicle import Vesicle, seed_meridian
+    from fem_ade.scenes.vesicle import Vesicle, seed_meridian
 
     R0 = 0.25
     for b in branches:
@@ -143,7 +143,7 @@ def line_key(v: float, branch: str, name: str, span, R0: float, eps: float, step
     """What a phase-field line is (its archived rows are reused only for the same): the
     branch followed in Δa₀ over ``span`` at v, R₀, ε and κ̄, its step, and the model's
     physics version."""
-    from fem_ade.model import PHYSICS_VERSION
+    from fem_ade.model.params import PHYSICS_VERSION
 
     return {"v": v, "branch": branch, "line": name, "from": span[0], "to": span[1],
             "R0": R0, "eps": eps, "kbar": KBAR, "step": step, "physics": PHYSICS_VERSION}
@@ -164,7 +164,7 @@ def line_point(key: dict) -> dict:
             "branch": branch, "base": "vesicle",
             "scene": {"v": key["v"], "kbar": KBAR, "eps": key["eps"], "R0": key["R0"]}}
     if key["branch"] == "pear":
-        from fem_ade.scenes import scene_to_mapping
+        from fem_ade.scenes.catalogue import scene_to_mapping
 
         spec.update(base=scene_to_mapping(pear_scene(key["v"], key["from"], key["eps"],
                                                      key["R0"])), scene={})
@@ -174,8 +174,8 @@ def line_point(key: dict) -> dict:
 def pear_scene(v: float, m0: float, eps: float, R0: float):
     """The pear's seed at Δa₀ = ``m0``: the ``vesicle`` family's, or where ``sharp_ref`` finds
     no pear there from scratch, :func:`continued_pear`."""
-    from fem_ade.model import ModelError
-    from fem_ade.scenes import vesicle_scene
+    from fem_ade.model.params import ModelError
+    from fem_ade.scenes.catalogue import vesicle_scene
 
     try:
         return vesicle_scene(v=v, da0=m0, kbar=KBAR, eps=eps, branch="pear", R0=R0)
@@ -185,12 +185,12 @@ def pear_scene(v: float, m0: float, eps: float, R0: float):
 
 def run_lines(base: Path, keys: list[dict], archive: dict, workers: int) -> None:
     """Follow the lines not in ``archive`` (or archived with another key) as one branch
-    sweep in ``base/sweep`` (:mod:`fem_ade.sweep`: a Dask task per line, resumable, a
+    sweep in ``base/sweep`` (:mod:`fem_ade.campaigns.sweep`: a Dask task per line, resumable, a
     failure recorded with its reason), and archive each line's outcome in
     ``base/lines.json`` as soon as the sweep has ended (:func:`archive_line`)."""
-    from fem_ade.model import ModelError
-    from fem_ade.output import write_json_atomic
-    from fem_ade.sweep import listed_sweep, run_sweep
+    from fem_ade.campaigns.sweep import listed_sweep, run_sweep
+    from fem_ade.model.params import ModelError
+    from fem_ade.store.output import write_json_atomic
 
     specs, todo = [], []
     for key in keys:
@@ -214,8 +214,8 @@ def archive_line(folder: Path, key: dict) -> dict:
     """A followed line's archive entry: its rows (branch.csv, the columns the report reads),
     or why it has none (its failure record's reason), and its seconds (the task's wall
     time: the seed and every Newton point)."""
-    from fem_ade.branch import read_table
-    from fem_ade.jobs import failure_record, read_failure, read_summary
+    from fem_ade.campaigns.branch import read_table
+    from fem_ade.engine.jobs import failure_record, read_failure, read_summary
 
     failed, summary = read_failure(folder), read_summary(folder)
     if failed is not None or summary is None:
@@ -235,9 +235,9 @@ def continued_pear(v: float, m0: float, eps: float, R0: float):
 
     import numpy as np
 
-    from fem_ade.initial import Meridian
-    from fem_ade.model import ModelError
-    from fem_ade.scenes import vesicle_scene
+    from fem_ade.model.params import ModelError
+    from fem_ade.scenes.catalogue import vesicle_scene
+    from fem_ade.scenes.initial import Meridian
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from ade_plane import follow as sharp_follow
@@ -267,7 +267,7 @@ def sharp_line(out: str, branch: str, v: float, grid) -> dict:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from ade_plane import follow as sharp_follow
 
-    from fem_ade.output import write_json_atomic
+    from fem_ade.store.output import write_json_atomic
 
     path = Path(out)
     if path.is_file():
@@ -295,7 +295,7 @@ def on_branch(row: dict, branch: str, sharp: dict) -> bool:
     must be labelled as ``branch`` or its pair's other branch (:data:`PAIRED`), and where both
     have a sharp shape near this Δa₀ its surface's da must be nearer ``branch``'s, else
     (only ``branch``'s) within DA_TOL or labelled ``branch``."""
-    from fem_ade.branch import branch_of_label
+    from fem_ade.campaigns.branch import branch_of_label
 
     family = branch_of_label(row["label"])
     if branch == "torus" or family == "torus":
@@ -367,10 +367,10 @@ def lowest(values: dict) -> str | None:
 
 def transitions(curves: dict, key: str) -> list[dict]:
     """Along one line: where the lowest branch changes, as the crossing of the two branches
-    (``fem_ade.branch.crossing``) on a fine grid of Δa₀."""
+    (``fem_ade.campaigns.branch.crossing``) on a fine grid of Δa₀."""
     import numpy as np
 
-    from fem_ade.branch import crossing
+    from fem_ade.campaigns.branch import crossing
 
     fine = np.linspace(DEFAULT_SPAN[0], DEFAULT_SPAN[1], 421)
     values = [{b: energy_at(rows, x, key) for b, rows in curves.items()} for x in fine]
@@ -471,7 +471,7 @@ def main(argv=None) -> dict:
                   line_seconds=round(sum(r["seconds"] for v in v_list
                                          for r in pf[v].values()), 1))
     suffix = "_quick" if q else ""
-    from fem_ade.output import write_json_atomic
+    from fem_ade.store.output import write_json_atomic
 
     write_json_atomic(args.out / f"ade_branches{suffix}.json", result)
     write_report(args.out, result, pf, sharp, suffix)
@@ -501,7 +501,7 @@ def sharp_lines(base: Path, v_list, branches, grid, workers: int) -> dict:
 
 def archived_sharp(base: Path, v_list, branches) -> dict:
     """--report-only: the kept sharp lines (ModelError where one is missing)."""
-    from fem_ade.model import ModelError
+    from fem_ade.model.params import ModelError
 
     sharp = {v: {} for v in v_list}
     for v in v_list:
@@ -515,7 +515,7 @@ def archived_sharp(base: Path, v_list, branches) -> dict:
 
 def archived_sizes(base: Path, v_list) -> dict:
     """--report-only: each line's R₀ as kept in ``base/R0.json``."""
-    from fem_ade.model import ModelError
+    from fem_ade.model.params import ModelError
 
     path = base / "R0.json"
     known = {float(k): x for k, x in json.loads(path.read_text()).items()} \
@@ -555,9 +555,9 @@ def write_report(out: Path, result: dict, pf: dict, sharp: dict, suffix: str) ->
     agree = sum(p["pf"] == p["sharp"] for p in pts if p["sharp"])
     lines = ["# The ADE plane from branches", "",
              f"Written by `studies/ade_branches.py`. κ̄/κ = {result['kbar']}; the phase field "
-             f"at ε = {result['eps']:g} (axisymmetric FEM, `fem_ade.branch`: every point a "
-             "Newton-converged steady state with V and A exact), each line of fixed v at one "
-             "R₀ for all its branches; the sharp membrane (`sharp_ref`) continued along m₀. "
+             f"at ε = {result['eps']:g} (axisymmetric FEM, `fem_ade.campaigns.branch`: every "
+             "point a Newton-converged steady state with V and A exact), each line of fixed v "
+             "at one R₀ for all its branches; the sharp membrane (`sharp_ref`) continued along m₀. "
              "e = (W + G)/W_sphere. The lowest branch among prolate, pear, oblate, "
              "stomatocyte and torus where each exists.", "",
              "**Made with older branch code, not rerun**: the lines were followed at "
@@ -609,7 +609,7 @@ def draw(out: Path, result: dict, suffix: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.render import save_figure
+    from fem_ade.plots.render import save_figure
 
     colours = {"prolate": "tab:blue", "pear": "tab:purple", "oblate": "tab:orange",
                "stomatocyte": "tab:green", "torus": "tab:red", None: "lightgrey"}

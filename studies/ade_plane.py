@@ -37,8 +37,8 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
-from fem_ade.output import write_json_atomic
-from fem_ade.render import save_figure
+from fem_ade.plots.render import save_figure
+from fem_ade.store.output import write_json_atomic
 from sharp_ref.branches import LEVELS, solve
 from sharp_ref.membrane import Q_ADE, BranchError
 

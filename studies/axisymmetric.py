@@ -5,7 +5,8 @@ Stage ``resolution`` — how many nodes per ε the default needs: seeded steady 
 prolate and the oblate at v = 0.8, the stomatocyte at v = 0.6, the Clifford torus (minimal
 model) and the pear at v = 0.85 with ADE (κ̄/κ = 1.4, Δa₀ = 1.8) — at ε = 0.04, 0.02, 0.01,
 for orders 4 and 8 at 1.5 … 4 nodes per ε, each against order 8 at 6 nodes per ε. The
-default (``fem_ade.fem.axisym.NODES_PER_EPS`` at ``DEFAULT_ORDER``) is the fewest nodes per ε
+default (``fem_ade.backends.fem.axisym.NODES_PER_EPS`` at ``DEFAULT_ORDER``) is the fewest nodes
+per ε
 whose error in E is below 1e-4 for every shape and ε.
 
 Stage ``cost`` — what a steady state costs at equal accuracy, side by side in one run: the
@@ -45,8 +46,8 @@ import math  # noqa: E402
 from pathlib import Path  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
 
-from fem_ade.output import write_json_atomic  # noqa: E402
-from fem_ade.render import save_figure  # noqa: E402
+from fem_ade.plots.render import save_figure  # noqa: E402
+from fem_ade.store.output import write_json_atomic  # noqa: E402
 
 OUT = Path("runs") / "studies"  # the committed results: --out studies/results
 #: the shapes of the resolution stage: (name, vesicle parameters or "clifford")
@@ -72,14 +73,14 @@ TARGETS = (1e-3, 1e-4, 1e-5)
 def scene_of(case: str, eps: float):
     """The case's scene at ε (the vesicle family, or the Clifford torus of the minimal model
     with the localized volume: R = 0.16 L, r = R/√2)."""
-    from fem_ade.scenes import vesicle_scene
+    from fem_ade.scenes.catalogue import vesicle_scene
 
     spec = CASES[case]
     if spec != "clifford":
         return vesicle_scene(eps=eps, **spec)
-    from fem_ade.initial import Torus
-    from fem_ade.model import Params
-    from fem_ade.scenes import Scene
+    from fem_ade.model.params import Params
+    from fem_ade.scenes.catalogue import Scene
+    from fem_ade.scenes.initial import Torus
 
     R = 0.16
     r = R / math.sqrt(2.0)
@@ -97,7 +98,7 @@ def cells(eps: float, order: int, nodes_per_eps: float) -> int:
 def run(case: str, eps: float, method: str, resolution, tol: float) -> dict:
     """One seeded steady state: method "axi" (resolution (order, nodes per ε)), "fem3d"
     (order 8, resolution = nodes per axis) or "spectral" (n)."""
-    from fem_ade.runs import recipe, simulate
+    from fem_ade.engine.runs import recipe, simulate
 
     scene = scene_of(case, eps)
     if method == "axi":
@@ -224,7 +225,7 @@ def cost_stage(runs: Runs, plan, compute=True) -> dict:
                  for t in TARGETS}
     fine = None
     if plan.fine_eps:
-        from fem_ade.fem.axisym import DEFAULT_ORDER, NODES_PER_EPS
+        from fem_ade.backends.fem.axisym import DEFAULT_ORDER, NODES_PER_EPS
 
         fine = runs.get(case, plan.fine_eps, "axi", (DEFAULT_ORDER, NODES_PER_EPS), tol,
                         compute)

@@ -2,9 +2,9 @@
 azimuthal mode m = 0 … 8, and where non-axisymmetric shapes are born (issue 43).
 
 Each branch — the prolate (R₀ = 0.17, from v = 0.95), the oblate (R₀ = 0.25, from 0.95) and
-the stomatocyte (R₀ = 0.25, from 0.62) — is followed down in v by ``fem_ade.branch`` with
+the stomatocyte (R₀ = 0.25, from 0.62) — is followed down in v by ``fem_ade.campaigns.branch`` with
 ``modes = 8`` at ε = 0.02 and 0.01, and at 0.005 over windows around the bifurcations found
-there (:data:`WINDOWS`; a branch sweep of listed points, :mod:`fem_ade.sweep`, two Dask
+there (:data:`WINDOWS`; a branch sweep of listed points, :mod:`fem_ade.campaigns.sweep`, two Dask
 workers, resumable): at every point the lowest eigenvalue of each block m and the count of
 unstable 3D directions (m ≥ 1 counted twice: cos mθ and sin mθ), and the bifurcations where
 a block's count changes (``bifurcations.json``: m ≥ 1 a non-axisymmetric branch is born;
@@ -108,9 +108,9 @@ def plan(eps_list, branches, step: float = STEP, modes: int = MODES,
 
 def rows_of(root: Path, name: str) -> tuple[list[dict], list[dict]]:
     """A finished branch's rows (branch.csv) and bifurcations, or ([], [])."""
-    from fem_ade.branch import read_table
-    from fem_ade.jobs import read_summary
-    from fem_ade.status import Status
+    from fem_ade.campaigns.branch import read_table
+    from fem_ade.engine.jobs import read_summary
+    from fem_ade.store.status import Status
 
     folder = root / "points" / name
     summary = read_summary(folder)
@@ -144,7 +144,7 @@ def summarize(root: Path, eps_list, branches, modes: int = MODES) -> dict:
     extrapolation."""
     from sharp_limit import extrapolate
 
-    from fem_ade.branch import same_branch
+    from fem_ade.campaigns.branch import same_branch
 
     table, curves = [], {}
     for seed, R0, start, stop, eps, n in runs_of(eps_list, branches):
@@ -198,7 +198,7 @@ def draw(path: Path, curves: dict, result: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.render import save_figure
+    from fem_ade.plots.render import save_figure
 
     colours = {"prolate": "tab:blue", "oblate": "tab:orange", "stomatocyte": "tab:green"}
     fig, axes = plt.subplots(1, len(result["eps"]), figsize=(5.2 * len(result["eps"]), 4.4),
@@ -242,10 +242,10 @@ def _e_at(pts, v):
 def write_report(out: Path, result: dict, suffix: str = "") -> None:
     lines = ["# Is it stable in 3D? The minimal model's branches in every azimuthal mode", "",
              "Written by `studies/azimuthal.py`: each branch followed down in v by "
-             "`fem_ade.branch` (axisymmetric, order 8, Newton on every point) with the "
+             "`fem_ade.campaigns.branch` (axisymmetric, order 8, Newton on every point) with the "
              f"azimuthal modes m = 0 … {result['modes']} at every point "
-             "(`fem_ade.fem.modes`: the lowest eigenvalue of each block, the unstable count "
-             "from the LU's inertia; docs/model.md §13). Stable in 3D: no unstable "
+             "(`fem_ade.backends.fem.modes`: the lowest eigenvalue of each block, the unstable "
+             "count from the LU's inertia; docs/model.md §13). Stable in 3D: no unstable "
              "direction in any block (m ≥ 1 counted twice). A bifurcation: a block's "
              "unstable count changes between two points (its v where the block's lowest "
              "eigenvalue crosses zero; `*` where that is not the crossing eigenvalue, the "
@@ -295,8 +295,8 @@ def write_report(out: Path, result: dict, suffix: str = "") -> None:
 def main(argv=None) -> dict:
     import sys
 
-    from fem_ade.output import write_json_atomic
-    from fem_ade.sweep import listed_sweep, report_rows, run_sweep
+    from fem_ade.campaigns.sweep import listed_sweep, report_rows, run_sweep
+    from fem_ade.store.output import write_json_atomic
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

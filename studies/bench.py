@@ -105,7 +105,7 @@ def time_interleaved(backends, repeats: int) -> list[dict]:
 
 def build(backend: str, scene, n: int, scheme: str, constraints: str = "penalty", **options):
     """A backend with Δt pushed (the set-up's wall and CPU seconds beside it)."""
-    from fem_ade.backend import make_backend
+    from fem_ade.backends.base import make_backend
 
     dt = scene.dt * (100 if scheme == "stabilized" else 1)
     t0, c0 = time.perf_counter(), time.process_time()
@@ -118,8 +118,8 @@ def peak_rss_mb(nodes: int, order: int, solver: str) -> float:
     """Peak resident memory (MB) of a fresh process that builds a run of ``nodes``³ nodes and
     steps: its VmHWM (ru_maxrss would carry the parent's peak over the fork, on Linux)."""
     code = (
-        "from fem_ade.backend import make_backend\n"
-        "from fem_ade.scenes import get_scene\n"
+        "from fem_ade.backends.base import make_backend\n"
+        "from fem_ade.scenes.catalogue import get_scene\n"
         f"s = get_scene({SCENE!r})\n"
         f"be = make_backend('fem', s, n={nodes // order}, dt=s.dt, solver={solver!r}, "
         f"order={order})\n"
@@ -136,7 +136,7 @@ def peak_rss_mb(nodes: int, order: int, solver: str) -> float:
 def time_to_steady(backend: str, scene, n: int, tol: float, **options) -> dict:
     """CPU time of the steady recipe (stabilized at 100× Δt, exact constraints, momentum)
     from the paper's initial condition."""
-    from fem_ade.runs import simulate
+    from fem_ade.engine.runs import simulate
 
     t0 = time.perf_counter()
     r = simulate(scene, backend=backend, n=n, dt=100 * scene.dt, scheme="stabilized",
@@ -149,7 +149,7 @@ def time_to_steady(backend: str, scene, n: int, tol: float, **options) -> dict:
 
 
 def machine() -> dict:
-    from fem_ade.output import package_versions
+    from fem_ade.store.output import package_versions
 
     cpu = ""
     try:
@@ -304,7 +304,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--repeats", type=int, default=None)
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args(argv)
-    from fem_ade.scenes import get_scene
+    from fem_ade.scenes.catalogue import get_scene
 
     quick = args.quick
     repeats = args.repeats or (2 if quick else 9)

@@ -1,16 +1,16 @@
 """Transitions from branch crossings (issue 32): the minimal model's prolate → oblate and
 oblate → stomatocyte transitions as the v where two branches followed by continuation
-(``fem_ade.branch``, axisymmetric, Newton on every point) have equal energy, at each ε,
+(``fem_ade.campaigns.branch``, axisymmetric, Newton on every point) have equal energy, at each ε,
 beside the sharp membrane's (``sharp_ref``) and the seeded steady states' of
 ``studies/sharp_limit.py``.
 
 The branches are the points of a branch sweep, ``studies/sweeps/branches.toml``
-(:mod:`fem_ade.sweep`: one Dask task per branch, two workers): each pair of branches is
+(:mod:`fem_ade.campaigns.sweep`: one Dask task per branch, two workers): each pair of branches is
 followed at one R₀ (the two branches' ε/R₀ equal), the prolate and the oblate at R₀ = 0.17
 (the largest at which the prolate at v = 0.62 fits the box) from v = 0.70 down to 0.62
 (0.645 at ε = 0.005), the oblate and the stomatocyte at R₀ = 0.25 from v = 0.62 down to
 0.56 (at ε = 0.005: the oblate to 0.58, the stomatocyte from 0.60 to 0.585). The crossing is
-:func:`fem_ade.branch.crossing` (linear between points ~0.002 apart); ε → 0 by Richardson
+:func:`fem_ade.campaigns.branch.crossing` (linear between points ~0.002 apart); ε → 0 by Richardson
 with p = 2 (the order every kept branch shows in ``sharp_limit.md``) over
 the two smallest ε with a crossing. The folds (turning points in v) of every branch are
 reported: where a branch ends at finite ε.
@@ -69,9 +69,9 @@ def pairs_of(sweep) -> list[dict]:
 
 def line(root: Path, point) -> list[dict]:
     """A branch point's rows (its branch.csv) once it has ended, else none."""
-    from fem_ade.branch import read_table
-    from fem_ade.jobs import read_summary
-    from fem_ade.status import Status
+    from fem_ade.campaigns.branch import read_table
+    from fem_ade.engine.jobs import read_summary
+    from fem_ade.store.status import Status
 
     folder = root / "points" / point.name
     summary = read_summary(folder)
@@ -83,8 +83,8 @@ def line(root: Path, point) -> list[dict]:
 def main(argv=None) -> dict:
     import sys
 
-    from fem_ade.output import write_json_atomic
-    from fem_ade.sweep import load_sweep, report_rows, run_sweep
+    from fem_ade.campaigns.sweep import load_sweep, report_rows, run_sweep
+    from fem_ade.store.output import write_json_atomic
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -118,12 +118,12 @@ def main(argv=None) -> dict:
 
 
 def transition(base: Path, pair: dict, eps_list: list, curves: dict) -> dict:
-    """One pair's row: its crossing at each ε (:func:`fem_ade.branch.crossing`), ε → 0 by
+    """One pair's row: its crossing at each ε (:func:`fem_ade.campaigns.branch.crossing`), ε → 0 by
     Richardson with p = 2 over the two smallest ε with one, where each branch ended and its
     folds; its branches' (v, e, unstable) added to ``curves``."""
     from sharp_limit import extrapolate
 
-    from fem_ade.branch import crossing, same_branch
+    from fem_ade.campaigns.branch import crossing, same_branch
 
     upper, lower = pair["branches"]
     name, R0 = f"{upper} → {lower}", pair["R0"]
@@ -189,7 +189,7 @@ def _crossings_table(payload: dict) -> list[str]:
     eps_list = payload["eps"]
     lines = ["# Transitions from branch crossings", "",
              "Written by `studies/branches.py`: each pair of branches followed in v by "
-             "`fem_ade.branch` (axisymmetric, order 8, 2.5 nodes per ε, Newton on every "
+             "`fem_ade.campaigns.branch` (axisymmetric, order 8, 2.5 nodes per ε, Newton on every "
              "point), at one R₀ for both; the transition is where their e = (W + G)/W_sphere "
              "are equal. ε → 0: Richardson with p = 2 over the two ε.", "",
              "**Made with older branch code**: these tables are the first run's (b732ffe … "
@@ -238,7 +238,7 @@ def figure(path: Path, payload: dict, curves: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.render import save_figure
+    from fem_ade.plots.render import save_figure
 
     eps_list = payload["eps"]
     fig, axes = plt.subplots(1, len(payload["pairs"]), figsize=(10, 4))

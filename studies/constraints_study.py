@@ -9,7 +9,7 @@ four variants are compared:
 * ``M10x``  penalties × 10;
 * ``M100x`` penalties × 100;
 * ``exact`` ``constraints="exact"``: V = α and A = β held at every step by Lagrange multipliers
-  solved inside the step's implicit operator (``fem_ade/constraints.py``, commit cbc9968;
+  solved inside the step's implicit operator (``fem_ade/model/constraints.py``, commit cbc9968;
   before it, an L² projection after the step, whose steady states depended on Δt),
   penalties off.
 
@@ -25,7 +25,7 @@ trial so that one run takes about ``--budget`` seconds at most (the trial's outc
 the case's trial.json until case.json holds it, so that a case interrupted after its trial
 does not repeat it). The trials run one after another (their step costs are measured with
 nothing beside them); the runs then run as one sweep of listed points on ``--workers`` Dask
-processes (:mod:`fem_ade.sweep`; the run folders ``OUT/constraints/sweep/points/NAME``,
+processes (:mod:`fem_ade.campaigns.sweep`; the run folders ``OUT/constraints/sweep/points/NAME``,
 resumable, a failure recorded with its reason). As the sweep ends, each case's results go
 to ``OUT/constraints/<scene>-<variant>/`` (case.json, and the run's summary.json and
 shape.png); the far-field (bulk) value of φ and the volume it carries are measured from
@@ -59,8 +59,8 @@ import math
 import time
 from pathlib import Path
 
-from fem_ade.render import compact_png
-from fem_ade.status import Status
+from fem_ade.plots.render import compact_png
+from fem_ade.store.status import Status
 
 DT_FACTORS = (100, 30, 10, 3, 1)
 VARIANTS = {  # name: (penalty factor or None for exact, label)
@@ -78,7 +78,7 @@ BIG = 1 << 20  # 1 MB
 
 
 def scene_for(name: str, variant: str):
-    from fem_ade.scenes import get_scene
+    from fem_ade.scenes.catalogue import get_scene
 
     scene = get_scene(name)
     factor = VARIANTS[variant][0]
@@ -127,8 +127,8 @@ def find_dt(
     """The largest Δt of DT_FACTORS × paper Δt with no divergence and E_M decreasing.
 
     ``stop_at_ok=False`` runs every factor (the full trial of ``--dt-trial``)."""
-    from fem_ade.model import ModelError
-    from fem_ade.runs import simulate
+    from fem_ade.engine.runs import simulate
+    from fem_ade.model.params import ModelError
 
     scene = scene_for(name, variant)
     log = []
@@ -217,7 +217,7 @@ def _volume_budget_table(out_root: Path, scenes, variants) -> list[str]:
     mean curvature H (second order in ε; for a sphere (π²/2)(ε/R)² of its volume), ΔV_bulk
     from :func:`bulk_offset`; *rest* is what these two do not account for.
     """
-    from fem_ade.scenes import get_scene
+    from fem_ade.scenes.catalogue import get_scene
 
     out = [
         "# Where the diffuse volume sits (until_steady = 1e-8 pass)",
@@ -332,7 +332,7 @@ def case_point(case: dict, dt: float, *, quick: bool, budget: float) -> tuple[di
     and Δt, and a cap ``max_steps`` from the trial's step cost so that it takes about
     ``budget`` seconds) and the run's length options (``until_steady`` and ``max_steps``, or
     ``steps`` for ``--quick``)."""
-    from fem_ade.scenes import scene_to_mapping
+    from fem_ade.scenes.catalogue import scene_to_mapping
 
     name, variant, n, every = case["scene"], case["variant"], case["n"], case["every"]
     ms = [e["ms_per_step"] for e in case["trials"] if e["dt"] == dt][0]
@@ -354,9 +354,9 @@ def case_point(case: dict, dt: float, *, quick: bool, budget: float) -> tuple[di
 
 def run_points(specs: list[dict], root: Path, workers: int) -> None:
     """The pass's production runs as one sweep of listed points in ``root``
-    (:mod:`fem_ade.sweep`: ``root/points/NAME``, on ``workers`` Dask processes, resumable,
+    (:mod:`fem_ade.campaigns.sweep`: ``root/points/NAME``, on ``workers`` Dask processes, resumable,
     a failure recorded with its reason)."""
-    from fem_ade.sweep import listed_sweep, run_sweep
+    from fem_ade.campaigns.sweep import listed_sweep, run_sweep
 
     run_sweep(listed_sweep(root.parent.name, specs), root, workers=workers, quiet=True)
 
@@ -367,8 +367,8 @@ def finish_case(case: dict, dt: float, out: Path, run: Path, run_kw: dict) -> di
     the results keep), case.json written; a failed run's reason as a ModelError."""
     import shutil
 
-    from fem_ade.jobs import read_failure, read_summary
-    from fem_ade.model import ModelError
+    from fem_ade.engine.jobs import read_failure, read_summary
+    from fem_ade.model.params import ModelError
 
     summary, failed = read_summary(run), read_failure(run)
     if summary is None or failed is not None:
@@ -453,8 +453,8 @@ def continuation_check(out_root: Path, *, budget: float, quiet: bool = False, la
     """
     import numpy as np
 
-    from fem_ade.jobs import status_of
-    from fem_ade.status import ENDED
+    from fem_ade.engine.jobs import status_of
+    from fem_ade.store.status import ENDED
 
     src = run_folder(out_root / "constraints" / "long" / "discocyte-exact") / "final.npz"
     with np.load(src) as z:
@@ -484,8 +484,8 @@ def continue_from(phi0, out: Path, variant: str, factor: float, *, budget: float
     continuation.json: the run, its start and end states and its energy record."""
     import numpy as np
 
-    from fem_ade.jobs import ensure
-    from fem_ade.runs import simulate
+    from fem_ade.engine.jobs import ensure
+    from fem_ade.engine.runs import simulate
 
     scene = scene_for("discocyte", variant)
     cons = "exact" if variant == "exact" else "penalty"
@@ -514,7 +514,7 @@ def continue_from(phi0, out: Path, variant: str, factor: float, *, budget: float
 def _check_state(energies: dict, phi, p) -> dict:
     """One end of a continuation: E, W, G, V, A, ΔA, the sharp shape's descriptors and the
     bulk offset of ``phi``."""
-    from fem_ade.shape import describe
+    from fem_ade.analysis.shape import describe
 
     sh = describe(phi, p.L)
     keys = ("components", "genus", "reduced_volume", "reduced_area_difference")
@@ -529,7 +529,7 @@ def _check_state(energies: dict, phi, p) -> dict:
 def _tidy_check_folder(out: Path) -> None:
     """Keep of a continuation's folder what the tables cite: its summary, history and a
     compressed shape.png."""
-    from fem_ade.output import series_files
+    from fem_ade.store.output import series_files
 
     for f in ("final.npz", "run.json", "initial.npz", "history.png"):
         (out / f).unlink(missing_ok=True)  # the tables cite shape.png only
@@ -588,7 +588,7 @@ def add_bulk(case_dir: Path) -> bool:
     """Measure :func:`bulk_offset` on ``case_dir/final.npz`` into ``case.json`` (if both exist)."""
     import numpy as np
 
-    from fem_ade.scenes import get_scene
+    from fem_ade.scenes.catalogue import get_scene
 
     cj, fz = case_dir / "case.json", run_folder(case_dir) / "final.npz"
     if not (cj.is_file() and fz.is_file()):
@@ -623,7 +623,7 @@ def clean(root: Path) -> list[Path]:
 
 def run_history(folder: Path) -> list[dict]:
     """A run folder's history.csv as one dict per record."""
-    from fem_ade.output import read_history
+    from fem_ade.store.output import read_history
 
     h = read_history(folder / "history.csv")
     return [dict(zip(h, values, strict=True)) for values in zip(*h.values(), strict=True)]
@@ -788,7 +788,7 @@ def write_report(out_root: Path, scenes, variants) -> Path:
 
 def _results_section(out_root: Path, subdir: str, title: str, scenes, variants) -> list[str]:
     """One result set's section: a table per scene, a row per variant."""
-    from fem_ade.scenes import get_scene
+    from fem_ade.scenes.catalogue import get_scene
 
     lines = [f"# Results with {title}", ""]
     for name in scenes:
@@ -982,9 +982,9 @@ def run_cases(args: argparse.Namespace, out_root: Path, scenes, variants, *,
     one sweep in ``PASS/sweep`` (:func:`run_points`), each finished into its case folder
     as the sweep ends (:func:`finish_case`); prints each; returns their case.json (a run
     that failed: SystemExit with the reasons, after the others are written)."""
-    from fem_ade.jobs import status_of
-    from fem_ade.model import ModelError
-    from fem_ade.status import ENDED
+    from fem_ade.engine.jobs import status_of
+    from fem_ade.model.params import ModelError
+    from fem_ade.store.status import ENDED
 
     subdir = SETS[1][0] if args.long else SETS[0][0]
     root = out_root / subdir

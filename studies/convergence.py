@@ -23,7 +23,7 @@ spectral reference, from the paper's initial condition and from a resolved start
 * ``temporal``: the order in Δt of the paper's scheme and of the stabilized one (spectral),
   and the stabilized scheme's slowdown.
 
-Every run goes through :func:`fem_ade.runs.simulate` — the command line's API — and its row
+Every run goes through :func:`fem_ade.engine.runs.simulate` — the command line's API — and its row
 carries the exact ``python -m fem_ade.run ...`` line that repeats it, its CPU seconds (set-up
 and loop) and wall time. Times are one thread: this script sets ``OPENBLAS_NUM_THREADS=1`` and
 ``FEM_ADE_FFT_WORKERS=1`` unless they are set. ``studies/cost.py`` reads the rows.
@@ -51,7 +51,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from fem_ade.render import save_figure  # noqa: E402
+from fem_ade.plots.render import save_figure  # noqa: E402
 
 OUT = Path("runs") / "studies"  # the committed results: --out studies/results
 QUANTITIES = ("E", "W", "G", "V", "A", "dA")
@@ -148,7 +148,7 @@ def command(scene: str, label: str, n: int, steps: int, phi0: str | None = None,
 
 def resample(phi: np.ndarray, m: int) -> np.ndarray:
     """A periodic grid field (n,)*d onto (m,)*d points by its Fourier series."""
-    from fem_ade.initial import resample_fourier
+    from fem_ade.scenes.initial import resample_fourier
 
     if phi.shape[0] == m:
         return phi
@@ -163,7 +163,7 @@ REPEATS = 1
 def run(scene, label: str, n: int, steps: int, *, phi0: str | None = None, out=None) -> dict:
     """One run through the command line's API: final diagnostics, φ on its uniform grid,
     CPU (set-up + loop; the least of :data:`REPEATS` runs) and wall seconds."""
-    from fem_ade.runs import simulate
+    from fem_ade.engine.runs import simulate
 
     backend, options = METHODS[label]
     t0 = time.perf_counter()
@@ -209,7 +209,7 @@ def fit(hs, errs, eps) -> float | None:
 def spatial(plan: dict, runs: Path) -> dict:
     """Every discretisation of ``plan["methods"]`` at every level, from both starts, against
     the spectral reference."""
-    from fem_ade.scenes import get_scene
+    from fem_ade.scenes.catalogue import get_scene
 
     out = {}
     for name, cfg in plan["scenes"].items():
@@ -252,8 +252,8 @@ def spatial(plan: dict, runs: Path) -> dict:
 
 def steady(plan: dict) -> dict:
     """Each level to its steady state; errors against the finest spectral steady state."""
-    from fem_ade.runs import simulate
-    from fem_ade.scenes import get_scene
+    from fem_ade.engine.runs import simulate
+    from fem_ade.scenes.catalogue import get_scene
 
     cfg = plan["steady"]
     scene = get_scene(cfg["scene"])
@@ -303,7 +303,7 @@ def steady(plan: dict) -> dict:
 def temporal(plan: dict) -> dict:
     """Order in Δt at t = T (T = steps × Δt₀), against the paper's scheme at Δt₀/8; and the
     stabilized scheme's slowdown (spectral: the time error is the same on every backend)."""
-    from fem_ade.scenes import get_scene
+    from fem_ade.scenes.catalogue import get_scene
 
     cfg = plan["temporal"]
     scene = get_scene(cfg["scene"])
@@ -323,8 +323,8 @@ def temporal(plan: dict) -> dict:
 
 def _run_to(scene, n: int, scheme: str, dt: float, T: float):
     """A spectral run of ``scheme`` at ``dt`` to t = T: its result and its final φ."""
-    from fem_ade.backend import make_backend
-    from fem_ade.loop import run_loop
+    from fem_ade.backends.base import make_backend
+    from fem_ade.engine.loop import run_loop
 
     be = make_backend("spectral", scene, n=n, scheme=scheme)
     steps = int(round(T / dt))
@@ -372,8 +372,8 @@ class _Watch:
 def _slowdown(scene, n: int, T: float, f: float, target: float) -> dict:
     """When the stabilized scheme at ``f`` × Δt₀ reaches the energy ``target`` (the paper's
     scheme's at T): its time, as a multiple of T, beside the predicted 1 + s₀Δt."""
-    from fem_ade.backend import make_backend
-    from fem_ade.loop import run_loop
+    from fem_ade.backends.base import make_backend
+    from fem_ade.engine.loop import run_loop
 
     be = make_backend("spectral", scene, n=n, scheme="stabilized")
     dt = f * scene.dt
@@ -444,7 +444,7 @@ def main(argv=None) -> dict:
             path.write_text(json.dumps(results, separators=COMPACT))  # resumable by part
     results.pop("q2", None)  # the earlier study's Q2 diagnosis: see convergence_notes.md
     results["run_s"] = sum(results.get("part_s", {}).values()) or time.perf_counter() - t0
-    from fem_ade.output import package_versions
+    from fem_ade.store.output import package_versions
 
     results["machine"] = {"cores": os.cpu_count(), "versions": package_versions(),
                           "threads": {k: os.environ.get(k) for k in

@@ -30,7 +30,7 @@ import math
 import time
 from pathlib import Path
 
-from fem_ade.render import save_figure
+from fem_ade.plots.render import save_figure
 
 OUT = Path("runs") / "studies"  # the committed results: --out studies/results
 TARGETS = (1e-2, 1e-3, 1e-4, 1e-5)

@@ -40,8 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_ade.output import write_json_atomic
-from fem_ade.sweep import Sweep, load_sweep, run_sweep
+from fem_ade.campaigns.sweep import Sweep, load_sweep, run_sweep
+from fem_ade.store.output import write_json_atomic
 
 HERE = Path(__file__).resolve().parent
 SWEEP = HERE / "sweeps" / "eps_ladder.toml"
@@ -62,8 +62,8 @@ def _cost(folder: Path) -> dict:
     """A finished run's steps, CPU seconds (set-up included), first and last energies."""
     import json
 
-    from fem_ade.output import read_history
-    from fem_ade.sharp import reduced_energy
+    from fem_ade.analysis.sharp import reduced_energy
+    from fem_ade.store.output import read_history
 
     s = json.loads((folder / "summary.json").read_text())
     E = read_history(folder / "history.csv")["E"]
@@ -77,8 +77,8 @@ def _cost(folder: Path) -> dict:
 
 def reprofiled(root: Path, point, coarse: Path) -> dict:
     """The re-profiled start: the seeded run at 2ε's end, its profile made ε's, run to a
-    steady state in ``root/reprofiled/NAME`` (:func:`fem_ade.jobs.ensure`)."""
-    from fem_ade.jobs import ensure
+    steady state in ``root/reprofiled/NAME`` (:func:`fem_ade.engine.jobs.ensure`)."""
+    from fem_ade.engine.jobs import ensure
 
     folder = root / "reprofiled" / point.name
     start = folder.with_name(point.name + ".start.npz")
@@ -96,8 +96,9 @@ def reprofiled(root: Path, point, coarse: Path) -> dict:
 def meridian_of(folder: Path, eps: float):
     """The φ = 0 meridian of an axisymmetric run's end as a ``meridian`` initial condition
     (its shape, the new ε's profile: what the sharp seed is, for a diffuse steady state)."""
-    from fem_ade.axishape import SavedField, meridians
-    from fem_ade.initial import Meridian
+    from fem_ade.analysis.axishape import meridians
+    from fem_ade.backends.fem.axisym import SavedField
+    from fem_ade.scenes.initial import Meridian
 
     with np.load(folder / "final.npz") as z:
         data = {k: np.array(z[k]) for k in z.files}
@@ -111,7 +112,7 @@ def meridian_of(folder: Path, eps: float):
 def reseeded(root: Path, point, source: Path, eps: float, arm: str) -> dict:
     """A start made from the φ = 0 meridian of ``source``'s end (at its ``eps``), run to a
     steady state in ``root/ARM/NAME``."""
-    from fem_ade.jobs import ensure
+    from fem_ade.engine.jobs import ensure
 
     folder = root / arm / point.name
     ensure(folder, lambda: point.scene().with_(ic=meridian_of(source, eps)),
@@ -197,7 +198,7 @@ def figure(rows: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.render import save_figure
+    from fem_ade.plots.render import save_figure
 
     fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.6))
     for arm, marker in zip(ARMS, "os^vD", strict=True):

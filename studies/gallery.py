@@ -28,7 +28,7 @@ with another smooth perturbation (0.05, seed 2) and run to a steady state again 
 it is stable if the kick returns to the same label and E (to 1e-4), else the kick's end is
 reported too.
 
-The runs are one sweep (:mod:`fem_ade.sweep`): each case a listed point — the paper's
+The runs are one sweep (:mod:`fem_ade.campaigns.sweep`): each case a listed point — the paper's
 scene with its variant's changes and run options (:func:`point_spec`) — and each kick a
 point that starts from its case's end (``after``), run on a local Dask cluster of
 ``--workers`` processes (default 2, one thread each). Resumable: a finished run is skipped,
@@ -64,10 +64,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_ade.jobs import status_of
-from fem_ade.model import ModelError
-from fem_ade.render import compact_png, save_figure
-from fem_ade.status import ENDED, Status
+from fem_ade.engine.jobs import status_of
+from fem_ade.model.params import ModelError
+from fem_ade.plots.render import compact_png, save_figure
+from fem_ade.store.status import ENDED, Status
 
 #: the committed gallery (its verdicts also go to fem_ade/verdicts.json when it is --out)
 RESULTS = Path(__file__).resolve().parent / "results" / "gallery"
@@ -88,7 +88,7 @@ SCENES_D = {"discocyte": "b", "torus": "c"}
 def plan(scene_names, backends, variants, quick: bool,
          max_steps: int = MAX_STEPS, steps_a: int | None = None) -> list[dict]:
     """The runs: one dict of simulate() keyword arguments (and bookkeeping) per case."""
-    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.scenes.catalogue import PAPER_SCENES
 
     cases = []
     for name in scene_names:
@@ -142,7 +142,7 @@ def scene_changes(case: dict) -> dict:
     if case["variant"] in ("b-loc", "c-loc"):
         return {"volume_functional": "localized"}
     if case["variant"] == "d":
-        from fem_ade.scenes import PAPER_SCENES
+        from fem_ade.scenes.catalogue import PAPER_SCENES
 
         p = PAPER_SCENES[case["scene"]].params
         return {"eps": p.eps / 2, "delta_A0": p.delta_A0 / 2}
@@ -150,12 +150,13 @@ def scene_changes(case: dict) -> dict:
 
 
 def scene_for(case: dict):
-    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.scenes.catalogue import PAPER_SCENES
 
     return PAPER_SCENES[case["scene"]].with_(**scene_changes(case))
 
 
-#: the run folders: one fem_ade.sweep folder (``OUT/sweep/points/VARIANT_BACKEND_SCENE`` and
+#: the run folders: one fem_ade.campaigns.sweep folder (``OUT/sweep/points/VARIANT_BACKEND_SCENE``
+# and
 #: ``…_kick``; not committed)
 SWEEP_DIR = "sweep"
 
@@ -178,7 +179,8 @@ def kick_dir(folder: Path) -> Path:
 
 
 def point_spec(case: dict) -> dict:
-    """The case as a listed point of a sweep (:mod:`fem_ade.sweep`): the paper's scene with
+    """The case as a listed point of a sweep (:mod:`fem_ade.campaigns.sweep`): the paper's scene
+    with
     the variant's changes, its run options, its perturbation's seed."""
     run = dict(case["kwargs"], render=True)
     return {"name": point_name(case["variant"], case["backend"], case["scene"]),
@@ -195,8 +197,8 @@ def kick_spec(spec: dict) -> dict:
 
 
 def as_sweep(specs: list[dict]):
-    """The listed points as one sweep, checked (:func:`fem_ade.sweep.check_sweep`)."""
-    from fem_ade.sweep import listed_sweep
+    """The listed points as one sweep, checked (:func:`fem_ade.campaigns.sweep.check_sweep`)."""
+    from fem_ade.campaigns.sweep import listed_sweep
 
     return listed_sweep("gallery", specs, base=specs[0]["base"])
 
@@ -243,7 +245,7 @@ def analyse(folder: Path, scene) -> dict:
         out["shapes"] = read_shapes(folder)
     history = folder / "history.csv"
     if history.is_file():
-        from fem_ade.output import read_history
+        from fem_ade.store.output import read_history
 
         h = read_history(history)
         E = h["E"]
@@ -259,7 +261,7 @@ def analyse(folder: Path, scene) -> dict:
 def slim(folder: Path) -> None:
     """Delete what the results do not need (fields, series, checkpoints) and make the
     pictures compact (256 colours)."""
-    from fem_ade.output import series_files
+    from fem_ade.store.output import series_files
 
     for name in ("final.npz", "checkpoint.npz", "run.json", "initial.npz"):
         (folder / name).unlink(missing_ok=True)
@@ -295,7 +297,7 @@ def run_cases(root: Path, cases: list[dict], kept: dict, *, workers: int, quiet:
               scheduler: str | None = None, rerun_changed: bool = False) -> None:
     """The unfinished cases and their kicks as one sweep on Dask (``workers`` processes:
     resumable, each run once; a kick runs once its case has ended, if it ended steady)."""
-    from fem_ade.sweep import run_sweep
+    from fem_ade.campaigns.sweep import run_sweep
 
     todo = [c for c in cases if _archived(root, c, kept) is None]
     if todo:
@@ -309,7 +311,7 @@ def finish_case(root: Path, case: dict, kept: dict, *, keep: bool) -> dict | Non
     """The case's analysis (and its kick's), its large files then deleted unless ``keep``;
     None (and a line saying why) for a case that failed. A run stopped by a signal keeps its
     checkpoint for the next sitting: it is not analysed or slimmed, and the gallery stops."""
-    from fem_ade.jobs import read_failure
+    from fem_ade.engine.jobs import read_failure
 
     done = _archived(root, case, kept)
     if done is not None:
@@ -379,7 +381,7 @@ def main(argv=None) -> dict:
                         ("--workers", args.workers)):
         if value is not None and value < 1:
             ap.error(f"{flag} must be a positive integer, got {value}")
-    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.scenes.catalogue import PAPER_SCENES
 
     quick = args.quick or bool(os.environ.get("CI"))
     root = Path(args.out)
@@ -424,7 +426,7 @@ def main(argv=None) -> dict:
 def write_pairs(root: Path, backend: str) -> dict:
     """``pairs-BACKEND.md``: every case run on both the spectral backend and ``backend``
     (``fem-pP``): the two ends' labels, pieces, genus and energies."""
-    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.scenes.catalogue import PAPER_SCENES
 
     rows, same, close = [], 0, 0
     entries = archive(root)
@@ -498,7 +500,7 @@ def archive(root: Path) -> dict:
     ``root`` (kept entries of runs whose folders are gone stay); returns the archive."""
     from PIL import Image
 
-    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.scenes.catalogue import PAPER_SCENES
 
     path = root / ARCHIVE
     old = json.loads(path.read_text()) if path.is_file() else {}
@@ -569,7 +571,7 @@ def interrupted(root: Path, variant: str, backend: str, name: str) -> str | None
     folder = run_dir(root, variant, backend, name)
     if (folder / "analysis.json").is_file() or not (folder / "history.csv").is_file():
         return None
-    from fem_ade.output import read_history
+    from fem_ade.store.output import read_history
 
     steps = int(read_history(folder / "history.csv")["step"][-1])
     rows = read_shapes(folder)
@@ -581,10 +583,10 @@ def interrupted(root: Path, variant: str, backend: str, name: str) -> str | None
 
 def no_seed(variant: str, name: str) -> str | None:
     """Why a seeded variant (c, c-loc) of scene ``name`` cannot run, or None."""
-    from fem_ade.seeds import SIZES
+    from fem_ade.scenes.seeds import SIZES
 
     if variant in ("c", "c-loc") and name not in SIZES:
-        return "no seed at ε = 0.05 (fem_ade/seeds.py)"
+        return "no seed at ε = 0.05 (fem_ade/scenes/seeds.py)"
     return None
 
 
@@ -666,7 +668,7 @@ def _with_analysed(root: Path, names, backends, variants) -> tuple[list, list, l
     """The selection widened to every scene, backend and variant analysed under ``root``, in
     the catalogue's order: a run of a few cells rewrites the whole report, not a report of
     those cells alone."""
-    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.scenes.catalogue import PAPER_SCENES
 
     kept = json.loads((root / ARCHIVE).read_text()) if (root / ARCHIVE).is_file() else {}
     found = [(v, b, n) for v in VARIANTS for b in BACKENDS for n in PAPER_SCENES
@@ -681,7 +683,7 @@ def _with_analysed(root: Path, names, backends, variants) -> tuple[list, list, l
 def write_report(root: Path, names, backends, variants, quick: bool = False) -> dict:
     """gallery.md, montage-BACKEND.png and phase-diagram.png from the analysed runs: those
     of the selection and every other one under ``root``."""
-    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.scenes.catalogue import PAPER_SCENES
 
     root.mkdir(parents=True, exist_ok=True)
     entries = archive(root)
@@ -690,9 +692,9 @@ def write_report(root: Path, names, backends, variants, quick: bool = False) -> 
             for n in names}
     lines = ["# The paper's gallery, settled", "",
              "Generated by `studies/gallery.py` (its docstring says what each variant runs). "
-             "Labels are those of `fem_ade.shape.classify`; v and Δa are the sharp surface's "
-             "reduced volume and area difference; V/α, A/β, ΔA/ΔA₀ the diffuse values; φ far "
-             "the median of φ farther than 6ε from the vesicle.", "",
+             "Labels are those of `fem_ade.analysis.shape.classify`; v and Δa are the sharp "
+             "surface's reduced volume and area difference; V/α, A/β, ΔA/ΔA₀ the diffuse "
+             "values; φ far the median of φ farther than 6ε from the vesicle.", "",
              *_verdicts_table(root, data, names, backends, variants),
              *_runs_table(data, names, backends, variants),
              *_backends_table(data, names, variants),
@@ -708,7 +710,7 @@ def write_report(root: Path, names, backends, variants, quick: bool = False) -> 
 
 def _verdicts_table(root: Path, data: dict, names, backends, variants) -> list[str]:
     """The report's first section: each scene's verdict per variant and backend."""
-    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.scenes.catalogue import PAPER_SCENES
 
     columns = [(v, b) for v in variants for b in backends if (v, b) != ("d", "fem")]
     lines = ["## Verdicts", "",
@@ -789,7 +791,7 @@ def write_verdicts(verdicts: dict) -> None:
 def archived_verdicts(root: Path = RESULTS) -> dict:
     """{(variant, backend, scene): verdict} of every run in ``root``'s archive (the
     gallery's two backends; what fem_ade/verdicts.json is made of)."""
-    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.scenes.catalogue import PAPER_SCENES
 
     entries = json.loads((root / ARCHIVE).read_text())
     out = {}
@@ -889,7 +891,7 @@ def phase_diagram(root: Path, data, names) -> Path | None:
     """Every steady end state on the sharp-interface axes (v, Δa), with the targets."""
     from matplotlib.figure import Figure
 
-    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.scenes.catalogue import PAPER_SCENES
 
     fig = Figure(figsize=(11.5, 6.5), dpi=100)
     ax = fig.subplots()

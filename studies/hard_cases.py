@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_ade.backend import make_backend
-from fem_ade.loop import run_loop
-from fem_ade.scenes import PAPER_SCENES
-from fem_ade.status import Status
+from fem_ade.backends.base import make_backend
+from fem_ade.engine.loop import run_loop
+from fem_ade.scenes.catalogue import PAPER_SCENES
+from fem_ade.store.status import Status
 
 CASES = [  # label, backend options, Δt factor, steps
     ("paper 1×", {}, 1, 300),

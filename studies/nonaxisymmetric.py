@@ -1,5 +1,6 @@
 """What the axisymmetric geometry cannot see: are its branch points stable to non-axisymmetric
-perturbations? (issue 32, stability). The axisymmetric stability count (``fem_ade.branch``)
+perturbations? (issue 32, stability). The axisymmetric stability count
+(``fem_ade.campaigns.branch``)
 covers the m = 0 modes only; this study bounds the others by experiment.
 
 For a few points of the ADE plane's branches (``studies/ade_branches.py``, ε = 0.01), the
@@ -22,7 +23,8 @@ the two where that sweep ended in non-axisymmetric shapes (starfish-3 at v = 0.7
 at 1.64 its neck is closed at ε = 0.01).
 
 Writes ``OUT/nonaxisymmetric.md`` and ``.json``. The 3D runs are one sweep
-(:mod:`fem_ade.sweep`, two Dask workers): each run a listed point whose base is its revolved
+(:mod:`fem_ade.campaigns.sweep`, two Dask workers): each run a listed point whose base is its
+revolved
 scene, in ``OUT/nonaxisymmetric/[eps=EPS/]sweep/points/CASE_{control,kicked}`` (their
 summary.json committed; a finished run is read back, a stopped one resumed from its
 checkpoint).
@@ -95,12 +97,12 @@ def revolved(line: Path, entry: dict, row: dict, phi, nodes, eps: float | None =
     line's ε, or at ``eps``: the same membrane with another interface width)."""
     import numpy as np
 
-    from fem_ade.axishape import meridians
-    from fem_ade.backend import make_backend
-    from fem_ade.branch import set_parameter
-    from fem_ade.initial import Meridian
-    from fem_ade.model import ModelError
-    from fem_ade.scenes import vesicle_scene
+    from fem_ade.analysis.axishape import meridians
+    from fem_ade.backends.base import make_backend
+    from fem_ade.campaigns.branch import set_parameter
+    from fem_ade.model.params import ModelError
+    from fem_ade.scenes.catalogue import vesicle_scene
+    from fem_ade.scenes.initial import Meridian
 
     info = json.loads((line / "branch.json").read_text())
     ended = entry["key"]
@@ -145,9 +147,10 @@ def folder_of(base: Path, name: str, kind: str) -> Path:
 
 
 def point_spec(name: str, kind: str, scene, n: int) -> dict:
-    """A case's run as a listed point of a sweep (:mod:`fem_ade.sweep`): the revolved scene
+    """A case's run as a listed point of a sweep (:mod:`fem_ade.campaigns.sweep`): the revolved
+    scene
     as its own base (a scene file's table), the steady recipe on the spectral backend."""
-    from fem_ade.scenes import scene_to_mapping
+    from fem_ade.scenes.catalogue import scene_to_mapping
 
     return {"name": f"{name}_{kind}", "base": scene_to_mapping(scene), "seed": 1,
             "run": {"recipe": "steady", "max_steps": MAX_STEPS, "checkpoint_every": 200,
@@ -158,15 +161,15 @@ def point_spec(name: str, kind: str, scene, n: int) -> dict:
 def run_all(specs: list[dict], base: Path) -> None:
     """The cases' runs as one sweep on two Dask workers (a control beside its kicked run):
     resumable, each run once, a failure recorded with its reason."""
-    from fem_ade.sweep import listed_sweep, run_sweep
+    from fem_ade.campaigns.sweep import listed_sweep, run_sweep
 
     run_sweep(listed_sweep("nonaxisymmetric", specs), base / "sweep", workers=2, quiet=True)
 
 
 def result_3d(folder: Path) -> dict:
     """What the report needs of a finished 3D run (its summary.json; a failure raises)."""
-    from fem_ade.jobs import read_failure, read_summary
-    from fem_ade.sharp import reduced_energy
+    from fem_ade.analysis.sharp import reduced_energy
+    from fem_ade.engine.jobs import read_failure, read_summary
 
     s = read_summary(folder)
     if s is None:
@@ -223,7 +226,7 @@ def main(argv=None) -> dict:
     if specs:
         run_all(specs, base)
     rows = [case_row(v, branch, row, name, base) for v, branch, row, name in found]
-    from fem_ade.output import write_json_atomic
+    from fem_ade.store.output import write_json_atomic
 
     write_json_atomic(args.out / f"nonaxisymmetric{suffix}.json", {"kick": KICK, "rows": rows})
     write_report(args.out / f"nonaxisymmetric{suffix}.md", rows)

@@ -1,6 +1,7 @@
 """Phase diagrams from the phase field: the sweeps ``studies/sweeps/minimal.toml`` (the minimal
 model along v) and ``studies/sweeps/ade.toml`` (the ADE model on a (v, Δa₀) grid at κ̄/κ =
-1.4), run with ``fem_ade.sweep`` on a local Dask cluster, and their notes: the lowest-energy
+1.4), run with ``fem_ade.campaigns.sweep`` on a local Dask cluster, and their notes: the
+lowest-energy
 end state per point against the lowest sharp branch there (``sharp_ref``: the seeds' sharp
 energies), and where the lowest changes.
 
@@ -20,10 +21,10 @@ import json
 import math
 from pathlib import Path
 
-from fem_ade.sharp import BRANCH_OF_LABEL
-from fem_ade.status import ENDED, HAS_RESULT, Status
-from fem_ade.sweep import Sweep, load_sweep, read_table, row, run_sweep
-from fem_ade.sweep_plot import draw
+from fem_ade.analysis.sharp import BRANCH_OF_LABEL
+from fem_ade.campaigns.sweep import Sweep, load_sweep, read_table, row, run_sweep
+from fem_ade.plots.sweep_plot import draw
+from fem_ade.store.status import ENDED, HAS_RESULT, Status
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_OUT = Path("runs/studies")
@@ -62,7 +63,7 @@ def lowest(rows: list[dict], keys: list[str]) -> dict:
 
 def sharp_torus(sweep: Sweep, at: dict) -> float | None:
     """The sharp axisymmetric torus's e at a point of a vesicle sweep (None: none there)."""
-    from fem_ade.vesicle import sharp_of
+    from fem_ade.scenes.vesicle import sharp_of
 
     if sweep.base != "vesicle":
         return None

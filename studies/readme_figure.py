@@ -15,9 +15,9 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from fem_ade.render import compact_png
-from fem_ade.runs import recipe, simulate
-from fem_ade.scenes import get_scene
+from fem_ade.engine.runs import recipe, simulate
+from fem_ade.plots.render import compact_png
+from fem_ade.scenes.catalogue import get_scene
 
 
 def main(argv=None) -> Path:

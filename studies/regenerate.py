@@ -6,7 +6,7 @@ reads (cost.py reads convergence.json and axisymmetric.md). The whole set takes 
 cores (the gallery most of them); ``--only`` picks studies, ``--dry-run`` prints the
 commands, each with the sweeps it runs (:data:`SWEEPS`) or why it is a measurement
 (:data:`MEASUREMENTS`). The sweeps' points are run folders made through
-:func:`fem_ade.jobs.ensure`, so a killed regeneration goes on where it stopped; ten rebuild
+:func:`fem_ade.engine.jobs.ensure`, so a killed regeneration goes on where it stopped; ten rebuild
 their committed report from their committed rows with ``--report-only``
 (``tests/test_studies.py`` checks it byte for byte).
 
@@ -48,7 +48,7 @@ STEPS = (
 )
 
 
-#: the sweeps a study runs through fem_ade.sweep: its sweep files, or the sweep it builds
+#: the sweeps a study runs through fem_ade.campaigns.sweep: its sweep files, or the sweep it builds
 #: from its plan (the gallery: a listed point per case, a kick after each; the
 #: non-axisymmetric check: a point per 3D run, its revolved scene as its base; the sharp
 #: limit and the ADE plane: a point per seeded run, its scene as its base; the ADE lines: a

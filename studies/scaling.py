@@ -51,7 +51,7 @@ def vmhwm_mb() -> float:
 
 def worker(argv: list[str], memory_file: str) -> int:
     """Under mpirun: the CLI, then every rank's peak memory gathered into ``memory_file``."""
-    from fem_ade.run import main
+    from fem_ade.cli.run import main
 
     code = main(argv)
     from mpi4py import MPI
@@ -82,7 +82,7 @@ def run_case(n: int, ranks: int, steps: int) -> dict:
         if r.returncode != 0:
             raise SystemExit(f"n = {n}, {ranks} rank(s) failed:\n{r.stderr[-3000:]}")
         summary = json.loads((out / "summary.json").read_text())
-        from fem_ade.output import read_history
+        from fem_ade.store.output import read_history
 
         h = read_history(out / "history.csv")
         solve = np.asarray(h["solve_s"])[1:]

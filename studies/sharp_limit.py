@@ -34,7 +34,7 @@ along each branch; meridians), ``OUT/sharp-eps.png`` (e against ε², extrapolat
 ``OUT/sharp-sections.png`` (the phase field's φ = 0 at the smallest ε over the sharp
 meridian). Every solve and run is cached in ``OUT/sharp/solves.json`` and
 ``OUT/sharp/runs.json`` (resumable: nothing cached is redone); the phase-field runs of a
-stage are one sweep (:mod:`fem_ade.sweep`: two Dask workers, each run in
+stage are one sweep (:mod:`fem_ade.campaigns.sweep`: two Dask workers, each run in
 ``OUT/sharp/sweep/points/NAME``, resumed where it was killed).
 
     python studies/sharp_limit.py --out studies/results     # everything (~2 h on 2 cores)
@@ -55,10 +55,13 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from fem_ade.output import write_json_atomic
-from fem_ade.render import save_figure
-from fem_ade.sharp import SPHERE_W, reduced_energy  # a sharp sphere's W (model units, per κ)
-from fem_ade.status import Status
+from fem_ade.analysis.sharp import (  # a sharp sphere's W (model units, per κ)
+    SPHERE_W,
+    reduced_energy,
+)
+from fem_ade.plots.render import save_figure
+from fem_ade.store.output import write_json_atomic
+from fem_ade.store.status import Status
 from sharp_ref.branches import solve
 from sharp_ref.membrane import BranchError
 
@@ -288,12 +291,12 @@ def radius(sharp: dict) -> float:
 def seeded(sharp: dict, branch: str, eps: float, backend: str, *, kbar: float = 0.0,
            m0: float = 0.0) -> SimpleNamespace:
     """One seeded steady state: its ``scene`` (the sharp meridian, R₀ fitted in the box), its
-    ``run`` options beside the ``steady`` recipe (fem_ade.runs.simulate's keywords), its
+    ``run`` options beside the ``steady`` recipe (fem_ade.engine.runs.simulate's keywords), its
     ``n`` (the row's) and ``R0``; with ``kbar`` (κ̄/κ), area-difference elasticity toward
     the reduced ``m0`` (ΔA₀ = 8πDR₀·m₀, R₀ the seed's in the box)."""
-    from fem_ade.initial import Meridian
-    from fem_ade.model import Params
-    from fem_ade.scenes import Scene
+    from fem_ade.model.params import Params
+    from fem_ade.scenes.catalogue import Scene
+    from fem_ade.scenes.initial import Meridian
 
     R0, v = radius(sharp), sharp["v"]
     ic = Meridian(centre=(0.5, 0.5, 0.5), r=tuple(sharp["r"]), z=tuple(sharp["z"]), scale=R0)
@@ -353,13 +356,13 @@ def point_name(key: str) -> str:
 def make_runs(root: Path, jobs: list[SimpleNamespace], workers: int = 2) -> list[tuple]:
     """The seeded steady states ``jobs`` (each: ``key``, ``sharp``, ``branch``, ``eps``,
     ``backend`` and ``ade``, the keywords kbar and m0 or none) as one sweep of listed points
-    (:mod:`fem_ade.sweep`) on ``workers`` Dask processes: each in
+    (:mod:`fem_ade.campaigns.sweep`) on ``workers`` Dask processes: each in
     ``root/sweep/points/NAME`` (:func:`point_name`), resumable, a failure recorded with its
     reason (and printed here). Returns (job, row) (:func:`phase_field_row`) of those that
     ended with a result, in the jobs' order."""
-    from fem_ade.jobs import read_failure, read_summary
-    from fem_ade.scenes import scene_to_mapping
-    from fem_ade.sweep import listed_sweep, run_sweep
+    from fem_ade.campaigns.sweep import listed_sweep, run_sweep
+    from fem_ade.engine.jobs import read_failure, read_summary
+    from fem_ade.scenes.catalogue import scene_to_mapping
 
     if not jobs:
         return []
@@ -995,7 +998,7 @@ def main(argv=None) -> dict:
     fine = set(plan.fine if args.fine is None else args.fine)
     lock = None
     if not args.report_only:  # one process at a time: the caches are read, then rewritten
-        from fem_ade.lock import FolderLock
+        from fem_ade.store.lock import FolderLock
 
         (args.out / "sharp").mkdir(parents=True, exist_ok=True)
         lock = FolderLock(args.out / "sharp").acquire()

@@ -33,7 +33,7 @@ TARGETS = {"point_m0_s": 10.0, "point_m8_s": 20.0, "point_small_s": 60.0}
 
 def branch_folder(root: Path, eps: float) -> Path:
     """A prolate branch of three points at ε (made once, without stability)."""
-    from fem_ade.branch import follow, vesicle_for_branch
+    from fem_ade.campaigns.branch import follow, vesicle_for_branch
 
     R0, start, stop = CASES[eps]
     out = root / f"prolate-eps={eps:g}"
@@ -48,9 +48,9 @@ def measure(folder: Path, old: bool) -> dict:
     """The times of one continuation point and of its stability, each solver."""
     import numpy as np
 
-    from fem_ade.branch import Continuation, load_points
-    from fem_ade.fem.newton import NewtonSystem
-    from fem_ade.stability import axisymmetric, cartesian, load_state
+    from fem_ade.backends.fem.newton import NewtonSystem
+    from fem_ade.campaigns.branch import Continuation, load_points
+    from fem_ade.campaigns.stability import axisymmetric, cartesian, load_state
 
     points = load_points(folder)[:3]
     be, _ = load_state(folder / "points" / f"{len(points) - 1:04d}")
@@ -88,7 +88,7 @@ def measure(folder: Path, old: bool) -> dict:
 
 
 def main(argv=None) -> dict:
-    from fem_ade.output import write_json_atomic
+    from fem_ade.store.output import write_json_atomic
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=OUT)

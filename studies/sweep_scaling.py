@@ -1,4 +1,5 @@
-"""Scale-out of ``fem_ade.sweep``, measured: one sweep on 1 and on 2 local Dask workers, and
+"""Scale-out of ``fem_ade.campaigns.sweep``, measured: one sweep on 1 and on 2 local Dask workers,
+and
 through an external scheduler started from the command line (``dask scheduler`` +
 ``dask worker``, as on a cluster).
 
@@ -28,8 +29,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from fem_ade.status import Status
-from fem_ade.sweep import Sweep, run_sweep
+from fem_ade.campaigns.sweep import Sweep, run_sweep
+from fem_ade.store.status import Status
 
 DEFAULT_OUT = Path("runs/studies")
 FULL = {"v": [0.7, 0.75, 0.8, 0.85, 0.9, 0.95, 0.97, 0.99], "n": 32, "eps": 0.05, "steps": 300}

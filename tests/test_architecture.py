@@ -1,6 +1,6 @@
-"""The architecture's promises (issue 9): a backend-blind loop and run folder, one registry that
-the backends and the CLI agree with, consistent directly built backends, parameters that
-re-derive what they derived."""
+"""The architecture's promises (issues 9 and 41): subpackages that are layers and import only
+downward, a backend-blind loop and run folder, one registry that the backends and the CLI agree
+with, consistent directly built backends, parameters that re-derive what they derived."""
 
 import ast
 import inspect
@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from fem_ade.backend import backend_class
-from fem_ade.model import Params
+from fem_ade.backends.base import backend_class
+from fem_ade.cli.run import build_parser
+from fem_ade.model.params import Params
 from fem_ade.registry import BACKENDS, CONSTRAINTS, SCHEMES
-from fem_ade.run import build_parser
 
 PACKAGE = Path(__file__).resolve().parents[1] / "fem_ade"
 
@@ -27,10 +27,10 @@ def _imports(path: Path) -> set[str]:
     return out
 
 
-@pytest.mark.parametrize("module", ["loop.py", "runs.py"])
+@pytest.mark.parametrize("module", ["engine/loop.py", "engine/runs.py"])
 def test_loop_and_run_folder_know_no_backend(module):
     imports = _imports(PACKAGE / module)
-    assert not any(m.startswith((".fem", "fem_ade.fem", "spectral_ref")) for m in imports), imports
+    assert not any(m.startswith(("fem_ade.backends.fem", "spectral_ref")) for m in imports), imports
     source = (PACKAGE / module).read_text()
     for option in {o.name for spec in BACKENDS.values() for o in spec.options}:
         assert f'"{option}"' not in source, f"{module} reads the backend option {option!r}"
@@ -114,6 +114,77 @@ def _module_graph() -> dict[str, set[str]]:
     return graph
 
 
+#: fem_ade's subpackages, lowest first: a module imports only from its own layer and the ones
+#: below it (docs/architecture.md, "The layers"); the top-level ``fem_ade`` package (its
+#: ``__version__`` and lazy names) and the five ``python -m fem_ade.COMMAND`` entry modules
+#: stand above them all
+LAYERS = ("registry", "model", "analysis", "scenes", "store", "backends", "plots", "engine",
+          "campaigns", "cli")
+#: the layers that know no backend: what they need of one goes through
+#: fem_ade.backends.base (the protocol and the registry's lookup)
+BACKEND_BLIND = ("model", "analysis", "scenes", "store", "engine")
+
+
+def _layer(module: str) -> int | None:
+    """The index of a fem_ade module's layer in LAYERS (the top: len(LAYERS)); None outside."""
+    parts = module.split(".")
+    if parts[0] != "fem_ade":
+        return None
+    if len(parts) > 1 and parts[1] in LAYERS:
+        return LAYERS.index(parts[1])
+    return len(LAYERS)
+
+
+def test_the_folder_tree_is_the_layers():
+    """Every module of fem_ade lives in one of LAYERS' subpackages, except the package itself,
+    the registry and the five command entry modules, which only call their layer's main."""
+    top = {p.stem for p in PACKAGE.glob("*.py")}
+    assert top == {"__init__", "registry", "run", "sweep", "branch", "render", "stability"}, top
+    dirs = {p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != "__pycache__"}
+    assert dirs == set(LAYERS) - {"registry"}, dirs
+    for name in ("run", "sweep", "branch", "render", "stability"):
+        tree = ast.parse((PACKAGE / f"{name}.py").read_text())
+        defs = [n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))]
+        assert not defs, f"fem_ade/{name}.py is an entry module: it defines nothing"
+
+
+def _layer_violations(graph: dict[str, set[str]]) -> tuple[list[str], list[str]]:
+    """(imports upward, backend imports in a backend-blind layer) of a module graph."""
+    up, blind = [], []
+    for mod, deps in graph.items():
+        here = _layer(mod)
+        if here is None or here == len(LAYERS):
+            continue
+        for dep in deps:
+            there = _layer(dep)
+            if dep != "fem_ade" and there is not None and there > here:
+                up.append(f"{mod} -> {dep}")
+            if LAYERS[here] in BACKEND_BLIND and dep.startswith(
+                    ("fem_ade.backends.fem", "spectral_ref")):
+                blind.append(f"{mod} -> {dep}")
+    return sorted(up), sorted(blind)
+
+
+def test_layers_import_only_downward():
+    """A module imports from its own layer or a lower one (lazy imports included), and the
+    backend-blind layers never import the FEM backend (or the spectral one)."""
+    up, blind = _layer_violations(_module_graph())
+    assert not up, "imports upward: " + "; ".join(up)
+    assert not blind, "a backend-blind layer imports a backend: " + "; ".join(blind)
+
+
+def test_a_layer_violation_is_caught():
+    """The two leaks this move removed, put back, are caught: analysis.axishape reading a
+    saved field through the FEM's tensor space, and a store module calling the engine."""
+    graph = _module_graph()
+    graph["fem_ade.analysis.axishape"] |= {"fem_ade.backends.fem.tensor"}
+    graph["fem_ade.store.output"] |= {"fem_ade.engine.runs"}
+    up, blind = _layer_violations(graph)
+    assert up == ["fem_ade.analysis.axishape -> fem_ade.backends.fem.tensor",
+                  "fem_ade.store.output -> fem_ade.engine.runs"], up
+    assert blind == ["fem_ade.analysis.axishape -> fem_ade.backends.fem.tensor"], blind
+
+
 def test_no_import_circles():
     """No module reaches itself through imports (lazy ones included): each layer stands on
     the ones below it."""
@@ -142,8 +213,8 @@ def test_spectral_reference_shares_no_physics():
     targets' ramp, output helpers, the thread settings), so that an error in the FEM's
     physics cannot hide in a comparison with it."""
     graph = _module_graph()
-    allowed = {"fem_ade.backend", "fem_ade.xdmf", "fem_ade.model", "fem_ade.constraints",
-               "fem_ade.threads"}
+    allowed = {"fem_ade.backends.base", "fem_ade.store.xdmf", "fem_ade.model.params",
+               "fem_ade.model.constraints", "fem_ade.backends.threads"}
     used = {d for d in graph["spectral_ref.solver"] if d.startswith("fem_ade")}
     assert used <= allowed, used
     source = (PACKAGE.parent / "spectral_ref" / "solver.py").read_text()
@@ -179,7 +250,7 @@ def test_sharp_reference_imports_nothing_of_the_phase_field():
 
 
 def test_one_definition_of_the_run_status():
-    """How a run ended is fem_ade.status's Status; which statuses count as ended or as having
+    """How a run ended is fem_ade.store.status's Status; which statuses count as ended or as having
     a result is defined there only (the sweep, its plots and the gallery once had three
     different 'finished' sets)."""
     import re
@@ -201,15 +272,15 @@ def test_one_definition_of_the_run_status():
 #: shrink, and none of them grow
 LONG = 60
 LONG_FUNCTIONS = {
-    "fem_ade/loop.py:run_loop": (103, "the loop: one place where a step's outcome (accept, "
-                                      "retry, diverge, stop, interrupt) is decided"),
-    "fem_ade/run.py:build_parser": (96, "argparse: one option per statement"),
-    "fem_ade/sweep.py:load_sweep": (65, "each mistake in a sweep file: its one-line error"),
-    "fem_ade/scenes.py:scene_from_mapping": (72, "each mistake in a TOML scene: its error"),
+    "fem_ade/engine/loop.py:run_loop": (103, "the loop: one place where a step's outcome "
+                                             "(accept, retry, diverge, stop, interrupt)"),
+    "fem_ade/cli/run.py:build_parser": (96, "argparse: one option per statement"),
+    "fem_ade/campaigns/sweep.py:load_sweep": (65, "each mistake in a sweep file: its error"),
+    "fem_ade/scenes/catalogue.py:scene_from_mapping": (72, "each mistake in a TOML scene"),
     "studies/sharp_limit.py:eps_figures": (68, "a matplotlib figure, panel by panel"),
-    "fem_ade/render.py:render_history": (68, "a matplotlib figure, panel by panel"),
-    "fem_ade/sweep_plot.py:phase_diagram": (65, "a matplotlib figure, layer by layer"),
-    "fem_ade/fem/petsc.py:__init__": (62, "the distributed set-up, in PETSc's order"),
+    "fem_ade/plots/render.py:render_history": (68, "a matplotlib figure, panel by panel"),
+    "fem_ade/plots/sweep_plot.py:phase_diagram": (65, "a matplotlib figure, layer by layer"),
+    "fem_ade/backends/fem/petsc.py:__init__": (62, "the distributed set-up, in PETSc's order"),
 }
 
 

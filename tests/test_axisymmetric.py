@@ -8,13 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from fem_ade.backend import make_backend
-from fem_ade.fem import gll
-from fem_ade.fem.axisym import AxisymmetricFEMBackend, graded_vertices
-from fem_ade.fem.tensor import BoundedAxis, TensorSpace
-from fem_ade.model import ModelError
-from fem_ade.runs import recipe, resume, simulate
-from fem_ade.scenes import get_scene, sphere_values, vesicle_scene
+from fem_ade.backends.base import make_backend
+from fem_ade.backends.fem import gll
+from fem_ade.backends.fem.axisym import AxisymmetricFEMBackend, graded_vertices
+from fem_ade.backends.fem.tensor import BoundedAxis, TensorSpace
+from fem_ade.engine.runs import recipe, resume, simulate
+from fem_ade.model.params import ModelError
+from fem_ade.scenes.catalogue import get_scene, sphere_values, vesicle_scene
 
 
 # ---------------------------------------------------------------------------------------------
@@ -69,7 +69,7 @@ def test_axis_quadrature_and_a_deliberate_error_in_it(monkeypatch):
 def test_radial_stiffness_symmetric_and_eigenbasis():
     """K_r symmetric with constants in its kernel (natural ends); the step's eigenbasis
     diagonalizes W and K of the (r, z) space."""
-    from fem_ade.fem.solve import Eigenbasis
+    from fem_ade.backends.fem.solve import Eigenbasis
 
     ar = BoundedAxis(graded_vertices(0.0, 1.0, 0.1, 0.4, 0.05), 4, radial=True)
     az = BoundedAxis(np.linspace(-0.5, 0.7, 9), 4)
@@ -149,7 +149,7 @@ def test_agrees_with_the_3d_spectral_reference_at_steady_state(prolate_ade, axi_
     ref = steady(prolate_ade, backend="spectral", n=48)
     for key in KEYS:
         assert axi_steady.final[key] == pytest.approx(ref.final[key], rel=1e-4), key
-    from fem_ade.sharp import BRANCH_OF_LABEL
+    from fem_ade.analysis.sharp import BRANCH_OF_LABEL
 
     assert BRANCH_OF_LABEL[axi_steady.shape["label"]] == "prolate"
     # the φ = 0 surface: contoured exactly on the meridian, by marching cubes on the 3D grid
@@ -180,9 +180,9 @@ def test_result_does_not_depend_on_the_domain(prolate_ade):
 
 def test_torus_matches_the_3d_spectral_run():
     """A torus (a loop off the axis: genus 1) against the 3D reference at ε = 0.04."""
-    from fem_ade.initial import Torus
-    from fem_ade.model import Params
-    from fem_ade.scenes import Scene
+    from fem_ade.model.params import Params
+    from fem_ade.scenes.catalogue import Scene
+    from fem_ade.scenes.initial import Torus
 
     R, r, eps = 0.16, 0.16 / math.sqrt(2), 0.04  # its images 11ε apart in the box
     params = Params(eps=eps, alpha=2 * math.pi**2 * R * r * r, beta=4 * math.pi**2 * R * r,
@@ -232,7 +232,7 @@ def test_graded_mesh_and_the_default_resolution():
     assert np.all(h[1:] / h[:-1] < 1.31) and np.all(h[:-1] / h[1:] < 1.31)
     scene = vesicle_scene(v=0.8, eps=0.01)
     n = AxisymmetricFEMBackend.default_n(scene)
-    from fem_ade.fem.axisym import DEFAULT_ORDER, NODES_PER_EPS
+    from fem_ade.backends.fem.axisym import DEFAULT_ORDER, NODES_PER_EPS
 
     assert 0.01 * n * DEFAULT_ORDER >= NODES_PER_EPS - 1e-9
 
@@ -256,7 +256,7 @@ def test_cli_run_folder_picture_and_resume(tmp_path, cli):
         assert z["phi_grid"].ndim == 3
     assert (out / "shape.png").stat().st_size > 10_000 and (out / "phi.xdmf").is_file()
     # the picture again from the folder's files (python -m fem_ade.render): the same bytes
-    from fem_ade.render import render_run
+    from fem_ade.plots.render import render_run
 
     picture = (out / "shape.png").read_bytes()
     render_run(out, quiet=True)
@@ -308,10 +308,10 @@ def test_amg_solves_the_same_system_as_the_fast_diagonalization():
 def test_willmore_torus_in_the_sharp_limit():
     """The Clifford torus (bending only, exact V and A): e at ε = 0.02 and 0.01, extrapolated
     at second order, is π/2 to 0.1 % (the sharp-limit study: 1.57083 from ε ≤ 0.01)."""
-    from fem_ade.initial import Torus
-    from fem_ade.model import Params
-    from fem_ade.scenes import Scene
-    from fem_ade.sharp import reduced_energy
+    from fem_ade.analysis.sharp import reduced_energy
+    from fem_ade.model.params import Params
+    from fem_ade.scenes.catalogue import Scene
+    from fem_ade.scenes.initial import Torus
 
     e = []
     for eps in (0.02, 0.01):
@@ -334,7 +334,7 @@ def test_a_run_starts_from_an_axisymmetric_runs_end(tmp_path):
     starts from its end (E equal to round-off), keeps its (r, z) field in initial.npz and
     resumes to the end of an uninterrupted run; a 3D run starts from its surface of
     revolution (E within the 3D grid's error)."""
-    from fem_ade.output import read_history
+    from fem_ade.store.output import read_history
 
     scene = vesicle_scene(v=0.9, branch="oblate", eps=0.05)
     kw = dict(backend="fem", backend_options={"geometry": "axisymmetric"}, every=5,

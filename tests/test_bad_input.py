@@ -2,7 +2,7 @@
 written; a diverged run keeps its last good state; a checkpoint resumes only its own run;
 signals at any moment end with one line and exit 130.
 
-Most cases run the CLI in-process (``fem_ade.run.main``); the fuzz test checks inputs with
+Most cases run the CLI in-process (``fem_ade.cli.run.main``); the fuzz test checks inputs with
 ``--dry-run`` (validated, not run) so that it takes seconds.
 """
 
@@ -23,7 +23,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from fem_ade import run
+from fem_ade.cli import run
 
 SMALL = ["--n", "16", "--allow-underresolved", "--quiet", "--no-render"]
 
@@ -254,19 +254,19 @@ def test_a_diverged_run_keeps_its_last_good_state_and_says_so(tmp_path, capsys):
     assert code == 3, err
     assert np.all(np.isfinite(np.load(out / "final.npz")["phi"]))
     assert (out / "shape.png").is_file()
-    from fem_ade.render import run_label
+    from fem_ade.plots.render import run_label
 
     summary = json.loads((out / "summary.json").read_text())
     assert "DIVERGED" in run_label(summary, 32)
 
 
 def test_interrupt_while_drawing_leaves_a_consistent_folder(tmp_path, capsys, monkeypatch):
-    import fem_ade.render
+    import fem_ade.plots.render
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(fem_ade.render, "draw_run", interrupted)
+    monkeypatch.setattr(fem_ade.plots.render, "draw_run", interrupted)
     out = tmp_path / "I"
     code, _, err = cli(["sphere", "--backend", "spectral", "--n", "16", "--allow-underresolved",
                         "--steps", "2", "--out", out, "--quiet"], capsys)
@@ -470,10 +470,10 @@ def test_api_mistakes(tmp_path):
     """The Python API: numpy integers are integers; config with the run's keywords, a dict as
     config, no scene, n = 0 and a negative dt are clear errors."""
     from fem_ade import get_scene, simulate
-    from fem_ade.backend import make_backend
-    from fem_ade.config import RunConfig
-    from fem_ade.loop import run_loop
-    from fem_ade.model import ModelError
+    from fem_ade.backends.base import make_backend
+    from fem_ade.engine.config import RunConfig
+    from fem_ade.engine.loop import run_loop
+    from fem_ade.model.params import ModelError
 
     scene = get_scene("discocyte")
     r = simulate(scene, backend="spectral", n=np.int64(16), steps=np.int64(2),
@@ -500,9 +500,9 @@ def test_a_signal_whose_exception_python_dropped_still_stops_the_run(monkeypatch
     the run ends interrupted, at step 0."""
     import gc
 
-    from fem_ade import interrupt
-    from fem_ade.runs import simulate
-    from fem_ade.scenes import get_scene
+    from fem_ade.engine.runs import simulate
+    from fem_ade.scenes.catalogue import get_scene
+    from fem_ade.store import interrupt
 
     class Finalized:
         def __del__(self):

@@ -1,4 +1,4 @@
-"""Branches by continuation (fem_ade.branch): each point a steady state, the table and the
+"""Branches by continuation (fem_ade.campaigns.branch): each point a steady state, the table and the
 pictures, a branch resumed after it was stopped, and mistakes refused in one line."""
 
 import csv
@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from fem_ade.backend import make_backend
-from fem_ade.branch import get_parameter, main, set_parameter
-from fem_ade.fem.newton import solve_steady
-from fem_ade.scenes import vesicle_scene
+from fem_ade.backends.base import make_backend
+from fem_ade.backends.fem.newton import solve_steady
+from fem_ade.campaigns.branch import get_parameter, main, set_parameter
+from fem_ade.scenes.catalogue import vesicle_scene
 
 ARGS = ["vesicle", "--branch", "prolate", "--eps", "0.05", "--R0", "0.2", "--param", "v",
         "--from", "0.95", "--to", "0.91", "--step", "0.02", "--quiet"]
@@ -227,7 +227,7 @@ def test_a_branch_folder_without_its_record_is_not_gone_on_with_in_another_model
     run folder is no branch folder either."""
     import shutil
 
-    from fem_ade.runs import simulate
+    from fem_ade.engine.runs import simulate
 
     out = tmp_path / "b"
     shutil.copytree(branch, out)
@@ -314,7 +314,7 @@ def test_crossing_of_two_branches():
     """Two branches with e linear in v cross where the lines do (exact for linear
     interpolation), from either direction; past a fold a branch is not used; branches that
     do not cross give None."""
-    from fem_ade.branch import crossing
+    from fem_ade.campaigns.branch import crossing
 
     v = np.linspace(0.70, 0.62, 9)
     a = [{"v": x, "e": 1.8 - 4.0 * (x - 0.66)} for x in v]
@@ -347,14 +347,15 @@ def test_a_fold_on_the_phase_field_oblate(tmp_path):
 
 def test_stability_equals_a_dense_eigensolve(branch):
     """The lowest eigenvalues of H_L v = λPv on {Cᵀv = 0}, C = (∇V, ∇A, P ∂φ/∂z)
-    (fem_ade.branch.stability) are those of the dense problem built column by column from the
+    (fem_ade.campaigns.branch.stability) are those of the dense problem built column by column from
+    the
     same operators and restricted to the constraints' null space by QR (LOBPCG, used before,
     missed eigenvalues near zero); the translation is not among them."""
     import scipy.linalg as sla
 
-    from fem_ade.branch import stability
-    from fem_ade.fem.modes import zero_modes
-    from fem_ade.fem.newton import NewtonSystem, linearize
+    from fem_ade.backends.fem.modes import zero_modes
+    from fem_ade.backends.fem.newton import NewtonSystem, linearize
+    from fem_ade.campaigns.branch import stability
 
     scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05, R0=0.2)
     n = json.loads((branch / "branch.json").read_text())["n"]
@@ -407,7 +408,7 @@ def test_stability_equals_a_dense_eigensolve(branch):
 def test_a_branch_ends_at_a_change_of_topology_not_of_label():
     """A genus-0 shape whose label changes (pear → gourd, discocyte → stomatocyte, gourd →
     chain) is the same branch; opening into a torus or pinching into two vesicles ends it."""
-    from fem_ade.branch import same_topology
+    from fem_ade.campaigns.branch import same_topology
 
     for a, b in (("pear", "gourd"), ("discocyte", "stomatocyte"), ("gourd", "chain"),
                  ("prolate", "cylinder"), ("torus", "torus"), ("2 vesicles", "2 vesicles")):
@@ -423,7 +424,7 @@ def test_a_vesicle_branch_fits_the_box_at_both_ends():
     v = 0.72 at ε = 0.01); a given R₀ is kept."""
     import math
 
-    from fem_ade.branch import vesicle_for_branch
+    from fem_ade.campaigns.branch import vesicle_for_branch
 
     def R0(scene):
         return math.sqrt(scene.params.beta / (4.0 * math.pi))
@@ -443,7 +444,7 @@ def test_the_predictor_is_the_quadratic_through_the_last_three_points():
     the quadratic's: O(Δs³) off the arc, where the secant's is O(Δs²) off (the pear at
     ε = 0.01 needed 5-8 Newton iterations a point from it against 6-12, and got past its fold);
     its tangent is the arc's to O(Δs²). From two points: the secant."""
-    from fem_ade.branch import Continuation
+    from fem_ade.campaigns.branch import Continuation
 
     scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05, R0=0.2)
     be = make_backend("fem", scene, n=12, geometry="axisymmetric", scheme="stabilized",

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from fem_ade.output import read_history
+from fem_ade.store.output import read_history
 
 
 def _same_run(a, b):

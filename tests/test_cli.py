@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from fem_ade.output import read_history
+from fem_ade.store.output import read_history
 
 COLUMNS = ["step", "t", "E", "W", "G", "V", "A", "dA"]
 
@@ -37,8 +37,8 @@ def test_cli_list(cli):
         assert name in r.stdout
     assert "Fig. 9" in r.stdout
     # every paper scene has a gallery line: a verdict from fem_ade/verdicts.json or "not run"
-    from fem_ade.run import gallery_verdicts
-    from fem_ade.scenes import PAPER_SCENES
+    from fem_ade.cli.run import gallery_verdicts
+    from fem_ade.scenes.catalogue import PAPER_SCENES
 
     assert r.stdout.count("gallery: ") == len(PAPER_SCENES)
     verdicts = gallery_verdicts()
@@ -161,7 +161,7 @@ def test_progress_toward_a_steady_state_tells_the_truth(cli, tmp_path):
     """Toward a steady state the bar follows the criterion (log10 of the energy change per
     step, from its first value to the tolerance), not the 20000-step cap: it ends at 100/100
     and shows the change; the pictures' time axis is the iteration (momentum)."""
-    from fem_ade.render import run_label
+    from fem_ade.plots.render import run_label
 
     out = tmp_path / "S"
     r = cli(["discocyte", "--recipe", "steady", "--order", "4", "--n", "16",

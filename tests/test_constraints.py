@@ -6,11 +6,11 @@ import json
 import numpy as np
 import pytest
 
-from fem_ade.backend import make_backend
-from fem_ade.constraints import ConstraintError, TargetRamp
-from fem_ade.loop import run_loop
-from fem_ade.output import read_history
-from fem_ade.scenes import PAPER_SCENES, get_scene
+from fem_ade.backends.base import make_backend
+from fem_ade.engine.loop import run_loop
+from fem_ade.model.constraints import ConstraintError, TargetRamp
+from fem_ade.scenes.catalogue import PAPER_SCENES, get_scene
+from fem_ade.store.output import read_history
 
 ALPHA, BETA = 0.0289, 0.4880  # discocyte
 

@@ -20,10 +20,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fem_ade.backend import make_backend
-from fem_ade.initial import Ellipsoid
+from fem_ade.backends.base import make_backend
 from fem_ade.registry import BACKENDS, CONSTRAINTS, SCHEMES, VOLUMES
-from fem_ade.scenes import get_scene
+from fem_ade.scenes.catalogue import get_scene
+from fem_ade.scenes.initial import Ellipsoid
 
 REFERENCE = "spectral"
 STEPS = 20
@@ -99,7 +99,7 @@ def test_backend_agrees_with_reference(backend, disc, volume, scheme, constraint
 if __name__ == "__main__":  # the check that a broken term fails this test
     import sys
 
-    from fem_ade.fem import forms
+    from fem_ade.backends.fem import forms
 
     which = sys.argv[1] if len(sys.argv) > 1 else "ade"
     if which == "ade":  # flip the sign of the ADE force (and of δΔA/δφ) in the FEM only

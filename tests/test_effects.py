@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 import spectral_ref.solver as spectral
-from fem_ade.loop import run_loop
-from fem_ade.model import ModelError
-from fem_ade.scenes import get_scene
+from fem_ade.engine.loop import run_loop
+from fem_ade.model.params import ModelError
+from fem_ade.scenes.catalogue import get_scene
 
 
 def _run(scene, steps=40, n=24):

@@ -1,4 +1,4 @@
-"""The FEM backend as the driver sees it (fem_ade.backend.Backend): protocol, state, effects,
+"""The FEM backend as the driver sees it (fem_ade.backends.base.Backend): protocol, state, effects,
 Krylov iteration counts, energy decay and the model §8 sphere values."""
 
 import json
@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from fem_ade.backend import Backend, make_backend
-from fem_ade.fem import FEMBackend, forms
-from fem_ade.model import ModelError, Params
-from fem_ade.scenes import get_scene, sphere_values
+from fem_ade.backends.base import Backend, make_backend
+from fem_ade.backends.fem import FEMBackend, forms
+from fem_ade.model.params import ModelError, Params
+from fem_ade.scenes.catalogue import get_scene, sphere_values
 
 
 @pytest.fixture(scope="module")
@@ -170,8 +170,8 @@ def test_solvers_agree_and_auto_choice():
 @pytest.mark.parametrize("order,mesh", [(1, None), (2, None), (1, "graded"), (5, "graded")])
 def test_output_fields_2d(order, mesh):
     """2D quads: the same code; fields on the uniform grid and a closed output mesh."""
-    from fem_ade.initial import Sphere
-    from fem_ade.scenes import Scene
+    from fem_ade.scenes.catalogue import Scene
+    from fem_ade.scenes.initial import Sphere
 
     ic = Sphere((0.5, 0.5), radius=0.25)
     scene = Scene("disc-2d", Params(eps=0.05, alpha=0.2, beta=1.5, effects={"bending"}),

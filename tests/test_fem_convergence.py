@@ -1,7 +1,8 @@
 """The FEM against the spectral reference at the same Δt: the difference is pure spatial error.
 
 From a resolved start — the spectral state after 20 steps of the 2D teaching ellipse, moved
-onto the FEM's GLL nodes by its own Fourier series (:func:`fem_ade.initial.resample_fourier`),
+onto the FEM's GLL nodes by its own Fourier series
+(:func:`fem_ade.scenes.initial.resample_fourier`),
 so both start from the same smooth field — the error in E, V, A after 100 steps falls at
 rate 2 for p = 1 and 4 for p = 2 (two-sided), and for p ≥ 4 reaches 1e-8 on the grids where
 p = 1 has 1e-2. From the paper's initial condition (the thin initial interface) the rates are
@@ -12,9 +13,9 @@ those of a transient whose error depends on where the nodes fall in the layer
 import numpy as np
 import pytest
 
-from fem_ade.fem import FEMBackend
-from fem_ade.initial import resample_fourier
-from fem_ade.scenes import get_scene
+from fem_ade.backends.fem import FEMBackend
+from fem_ade.scenes.catalogue import get_scene
+from fem_ade.scenes.initial import resample_fourier
 
 spectral = pytest.importorskip("spectral_ref.solver")
 

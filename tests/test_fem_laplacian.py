@@ -5,11 +5,11 @@ to scikit-fem's assembly with the GLL rule, the constants as its kernel, the fir
 import numpy as np
 import pytest
 
-from fem_ade.fem import gll
-from fem_ade.fem import mesh as fm
-from fem_ade.fem.assemble import AssembledSpace
-from fem_ade.fem.solve import Eigenbasis
-from fem_ade.fem.tensor import TensorSpace
+from fem_ade.backends.fem import gll
+from fem_ade.backends.fem import mesh as fm
+from fem_ade.backends.fem.assemble import AssembledSpace
+from fem_ade.backends.fem.solve import Eigenbasis
+from fem_ade.backends.fem.tensor import TensorSpace
 
 
 @pytest.mark.parametrize("p", [1, 2, 3, 5, 8, 12])
@@ -90,7 +90,7 @@ def test_first_eigenvalue_rate(order, ns, rate):
 
 def test_fourier_and_dense_eigenbases_agree():
     """p = 1 on a uniform mesh: the FFT eigenbasis and the dense one give the same S⁻¹."""
-    from fem_ade.fem.solve import DiagonalizedSolver, StepMatrix
+    from fem_ade.backends.fem.solve import DiagonalizedSolver, StepMatrix
 
     space = TensorSpace(fm.uniform(3, 8).axes, 1)
     S = StepMatrix.of(dt=1e-5, kappa=1.0, eps=0.05)

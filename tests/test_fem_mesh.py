@@ -8,10 +8,10 @@ import meshio
 import numpy as np
 import pytest
 
-from fem_ade.fem import FEMBackend
-from fem_ade.fem import mesh as fm
-from fem_ade.model import ModelError
-from fem_ade.scenes import get_scene
+from fem_ade.backends.fem import FEMBackend
+from fem_ade.backends.fem import mesh as fm
+from fem_ade.model.params import ModelError
+from fem_ade.scenes.catalogue import get_scene
 
 MESHES = Path(__file__).resolve().parents[1] / "meshes"
 sys.path.insert(0, str(MESHES))

@@ -1,11 +1,11 @@
 """The FEM runs the spectral reference's schemes: the stabilized large-step scheme (model §9)
-and exact constraints by multipliers inside the step (fem_ade.constraints)."""
+and exact constraints by multipliers inside the step (fem_ade.model.constraints)."""
 
 import numpy as np
 import pytest
 
-from fem_ade.fem import FEMBackend
-from fem_ade.scenes import get_scene
+from fem_ade.backends.fem import FEMBackend
+from fem_ade.scenes.catalogue import get_scene
 
 spectral = pytest.importorskip("spectral_ref.solver")
 
@@ -70,7 +70,7 @@ def test_stabilized_state_restores_bit_for_bit():
 
 def test_stabilized_low_rank_terms_are_the_penalty_hessians():
     """σ b bᵀ: b are the exact gradients of the discrete V, A, ΔA (finite differences)."""
-    from fem_ade.fem import forms
+    from fem_ade.backends.fem import forms
 
     scene = get_scene("discocyte")
     b = FEMBackend(scene, n=12, dt=scene.dt, scheme="stabilized")
@@ -163,7 +163,7 @@ def test_preconditioner_shift():
     """s = √(κετ) while β = cτ/√(κετ) ≤ 2 (measured best: discocyte and torus at 100× Δt,
     β = 1.8 and 2.0, mean PCG its 4.5 / 4.2 against 7–10 at s/2 or 2s); beyond, the ideal
     spread of P⁻¹S over the spectrum is never worse than with √(κετ)."""
-    from fem_ade.fem.solve import preconditioner_shift
+    from fem_ade.backends.fem.solve import preconditioner_shift
 
     tau, ke = 4e-6, 0.04
     s_star = np.sqrt(ke * tau)

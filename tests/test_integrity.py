@@ -13,7 +13,7 @@ import shutil
 import numpy as np
 import pytest
 
-from fem_ade.run import main
+from fem_ade.cli.run import main
 
 RUN = ["discocyte", "--backend", "spectral", "--n", "16", "--allow-underresolved", "--every",
        "5", "--quiet", "--no-render", "--save-every", "5"]

@@ -1,4 +1,4 @@
-"""fem_ade.jobs.ensure: the one way a study, a sweep or a branch makes a run's result exist —
+"""fem_ade.engine.jobs.ensure: the one way a study, a sweep or a branch makes a run's result exist —
 start, skip when finished, resume after a kill, start from another run's end, record a
 failure with its reason, report or wait for a busy folder."""
 
@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from fem_ade.jobs import ensure, failure_record, status_of
-from fem_ade.lock import FolderBusy
-from fem_ade.model import ModelError
-from fem_ade.output import read_history
-from fem_ade.scenes import PAPER_SCENES
-from fem_ade.status import Status
+from fem_ade.engine.jobs import ensure, failure_record, status_of
+from fem_ade.model.params import ModelError
+from fem_ade.scenes.catalogue import PAPER_SCENES
+from fem_ade.store.lock import FolderBusy
+from fem_ade.store.output import read_history
+from fem_ade.store.status import Status
 
 SCENE = PAPER_SCENES["discocyte"]
 OPTIONS = {"backend": "spectral", "n": 16, "every": 5, "render": False,
@@ -97,7 +97,7 @@ def test_a_failure_is_recorded_with_its_reason_and_tried_again(tmp_path):
 
 
 def test_a_busy_folder_is_reported_or_waited_for(tmp_path, monkeypatch):
-    monkeypatch.setattr("fem_ade.jobs.WAIT_POLL_S", 0.01)
+    monkeypatch.setattr("fem_ade.engine.jobs.WAIT_POLL_S", 0.01)
     calls = []
 
     def make(folder):

@@ -1,5 +1,6 @@
 """Direct solves of the Hessian and the stability of axisymmetric states in each azimuthal
-mode m (fem_ade.fem.direct, fem_ade.fem.modes, fem_ade.stability; docs/model.md §13):
+mode m (fem_ade.backends.fem.direct, fem_ade.backends.fem.modes, fem_ade.campaigns.stability;
+docs/model.md §13):
 the same Newton iterates and eigenvalues as the iterative path, the mode operator against
 Bessel modes, a sphere's multiplets, the blocks against a 3D eigen-solve, the zero modes
 taken out, the inertia's count, the command line."""
@@ -10,13 +11,13 @@ import math
 import numpy as np
 import pytest
 
-from fem_ade.backend import make_backend
-from fem_ade.branch import main as branch_main
-from fem_ade.fem import modes as M
-from fem_ade.fem.newton import NewtonSystem, kkt_solve, linearize, solve_steady
-from fem_ade.scenes import vesicle_scene
-from fem_ade.stability import axisymmetric, cartesian, load_state
-from fem_ade.stability import main as stability_main
+from fem_ade.backends.base import make_backend
+from fem_ade.backends.fem import modes as M
+from fem_ade.backends.fem.newton import NewtonSystem, kkt_solve, linearize, solve_steady
+from fem_ade.campaigns.branch import main as branch_main
+from fem_ade.campaigns.stability import axisymmetric, cartesian, load_state
+from fem_ade.campaigns.stability import main as stability_main
+from fem_ade.scenes.catalogue import vesicle_scene
 
 BRANCH = ["vesicle", "--branch", "prolate", "--eps", "0.04", "--R0", "0.2", "--param", "v",
           "--from", "0.85", "--to", "0.84", "--step", "0.01", "--quiet", "--modes", "4"]
@@ -33,7 +34,7 @@ def prolate(tmp_path_factory):
 
 def _backend(eps=0.05, v=0.9, branch="prolate", R0=0.2, **ade):
     scene = vesicle_scene(v=v, branch=branch, eps=eps, R0=R0, **ade)
-    from fem_ade.fem.axisym import default_cells
+    from fem_ade.backends.fem.axisym import default_cells
 
     return make_backend("fem", scene, n=default_cells(eps, 1.0, 8), geometry="axisymmetric",
                         scheme="stabilized", constraints="exact", dt=scene.dt)
@@ -60,7 +61,7 @@ def test_a_factorization_is_of_its_own_parameters():
     Δa₀ moves (the ADE term's force, so the Hessian), a new linearization's solve has a
     residual of round-off in the matrix-free Hessian, while the solve of the factorization
     from before the move leaves a residual of the change's size."""
-    from fem_ade.branch import set_parameter
+    from fem_ade.campaigns.branch import set_parameter
 
     be = _backend(kbar=1.4, da0=1.2)
     solve_steady(be)
@@ -107,7 +108,7 @@ def test_the_mode_laplacian_on_bessel_modes(m):
     import scipy.special as ss
     from scipy.optimize import brentq
 
-    from fem_ade.fem.tensor import BoundedAxis, TensorSpace
+    from fem_ade.backends.fem.tensor import BoundedAxis, TensorSpace
 
     R, Z, p, cells = 0.5, 1.0, 8, 6
     space = TensorSpace([BoundedAxis(np.linspace(0, R, cells + 1), p, radial=True),
@@ -255,7 +256,7 @@ def test_the_inertia_counts_what_the_eigensolve_finds(tmp_path):
     """The count below the threshold from the LU's inertia equals the number of computed
     eigenvalues below it, on an oblate at ε = 0.04 whose m = 2 block has one (v = 0.85)."""
     be = _oblate(tmp_path, modes=3)
-    from fem_ade.stability import threshold
+    from fem_ade.campaigns.stability import threshold
 
     result = axisymmetric(be, range(4), 3)
     for m in range(4):
@@ -288,7 +289,7 @@ def test_a_bifurcation_is_located_at_the_eigenvalues_zero():
     −4e-9, −5.7e-10 stable, the zero in the next interval); the bifurcation is placed at the
     zero there, not at the midpoint of the interval where the count changed. Where no
     neighbouring interval holds a zero, the midpoint, ``located`` False."""
-    from fem_ade.branch import bifurcations
+    from fem_ade.campaigns.branch import bifurcations
 
     def row(v, lowest, count):
         return {"v": v, "s": 1.0 - v, "fold": "", "lowest_m2": lowest,
@@ -324,7 +325,7 @@ def test_the_stability_command(prolate, tmp_path, capsys):
     assert data["unstable_3d"] == 0 and math.isfinite(data["modes"]["1"][0])
     assert stability_main([str(tmp_path)]) == 2
     assert "neither a run folder" in capsys.readouterr().err
-    from fem_ade.runs import simulate
+    from fem_ade.engine.runs import simulate
 
     run = tmp_path / "run"
     simulate(vesicle_scene(v=0.85, branch="prolate", eps=0.04, R0=0.2), steps=3,

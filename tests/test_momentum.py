@@ -1,14 +1,14 @@
 """Momentum with adaptive restart (``accelerate``): the same steady state as the scheme,
-reached in far fewer steps (fem_ade.loop)."""
+reached in far fewer steps (fem_ade.engine.loop)."""
 
 import numpy as np
 import pytest
 
-from fem_ade.backend import make_backend
-from fem_ade.loop import AdaptiveDt, run_loop
-from fem_ade.model import ModelError
-from fem_ade.runs import simulate
-from fem_ade.scenes import get_scene
+from fem_ade.backends.base import make_backend
+from fem_ade.engine.loop import AdaptiveDt, run_loop
+from fem_ade.engine.runs import simulate
+from fem_ade.model.params import ModelError
+from fem_ade.scenes.catalogue import get_scene
 
 
 @pytest.mark.parametrize("backend", ["spectral", "fem"])

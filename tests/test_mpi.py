@@ -16,7 +16,7 @@ import sys
 import numpy as np
 import pytest
 
-from fem_ade.output import read_history
+from fem_ade.store.output import read_history
 
 try:
     import mpi4py  # noqa: F401
@@ -118,7 +118,7 @@ def test_petsc_missing_is_one_line(tmp_path, monkeypatch):
     """Without petsc4py (hidden here when installed), ``--linalg petsc`` is exit 2 with how
     to install it, and nothing is written."""
     code = ("import sys; sys.modules['petsc4py'] = None; sys.modules['mpi4py'] = None; "
-            "from fem_ade.run import main; sys.exit(main(sys.argv[1:]))")
+            "from fem_ade.cli.run import main; sys.exit(main(sys.argv[1:]))")
     out = tmp_path / "x"
     r = subprocess.run([sys.executable, "-c", code, "discocyte", "--n", "32", "--steps", "2",
                         "--linalg", "petsc", "--out", str(out)], capture_output=True,

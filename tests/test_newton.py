@@ -1,14 +1,15 @@
-"""Newton's method for steady states (fem_ade.fem.newton): the exact Hessian-vector product of
+"""Newton's method for steady states (fem_ade.backends.fem.newton): the exact Hessian-vector
+product of
 every term, quadratic convergence, and the same steady state as the gradient flow's."""
 
 import numpy as np
 import pytest
 
-from fem_ade.backend import make_backend
-from fem_ade.fem.newton import solve_steady
-from fem_ade.loop import run_loop
-from fem_ade.runs import recipe
-from fem_ade.scenes import get_scene, vesicle_scene
+from fem_ade.backends.base import make_backend
+from fem_ade.backends.fem.newton import solve_steady
+from fem_ade.engine.loop import run_loop
+from fem_ade.engine.runs import recipe
+from fem_ade.scenes.catalogue import get_scene, vesicle_scene
 
 CASES = {
     "axisymmetric, ADE, exact": (lambda: vesicle_scene(v=0.85, branch="prolate", eps=0.04,
@@ -77,7 +78,7 @@ def test_bordered_solve_meets_its_tolerance_with_the_right_side_in_the_constrain
     """A branch's tangent: the bordered system's right side only in the constraint rows
     (∂F/∂v). The M-norm of the true residual is below 1e-8 of the right side's — the test
     scipy's minres does not make (its backward error stopped it after 2 iterations here)."""
-    from fem_ade.fem.newton import NewtonSystem, kkt_solve, linearize
+    from fem_ade.backends.fem.newton import NewtonSystem, kkt_solve, linearize
 
     scene = vesicle_scene(v=0.9, branch="prolate", eps=0.02)
     be = make_backend("fem", scene, n=16, geometry="axisymmetric", scheme="stabilized",
@@ -108,7 +109,7 @@ def test_a_step_that_climbs_is_taken_downhill(monkeypatch):
     """Where the Newton step climbs (∇Lᵀδφ > 0: negative curvature along it, met at a saddle
     a flow crept to — the stomatocyte at v = 0.6, eps = 0.005) solve_steady takes it the other
     way instead of giving up. Here the first step is made to climb by reversing it."""
-    import fem_ade.fem.newton as newton
+    import fem_ade.backends.fem.newton as newton
 
     scene = vesicle_scene(v=0.8, branch="oblate", eps=0.04)
     be = make_backend("fem", scene, n=10, geometry="axisymmetric", scheme="stabilized",

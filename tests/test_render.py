@@ -1,4 +1,4 @@
-"""Pictures without a display (fem_ade.render): shape.png and history.png of a run folder."""
+"""Pictures without a display (fem_ade.plots.render): shape.png and history.png of a run folder."""
 
 import json
 import os
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from fem_ade.render import main, render_history, render_shape
+from fem_ade.plots.render import main, render_history, render_shape
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -90,7 +90,7 @@ def test_shape_picture_shows_the_membrane_and_its_section(tmp_path):
     """What the 3D view shows: the membrane in its colour, and — VTK — the section y = ½ as
     one whole dark curve across it (flush with the surface it showed as broken "seams"):
     a torus cut by y = ½ in two circles; the dark pixels of the left panel form long runs."""
-    from fem_ade.render import COLOURS, choose_engine
+    from fem_ade.plots.render import COLOURS, choose_engine
 
     n = 48
     x = np.arange(n) / n
@@ -119,7 +119,7 @@ def test_render_history_computes_penalties(tmp_path):
         f"{k},{tk!r},{30 - k},{25 - k},{0.1 * (k + 1)},{0.1 + 0.01 * k},{1 - 0.02 * k},0.2"
         for k, tk in enumerate(t.tolist())]
     csv.write_text("\n".join(rows) + "\n")
-    from fem_ade.model import Params
+    from fem_ade.model.params import Params
 
     p = Params(eps=0.04, alpha=0.1, beta=1.0, delta_A0=0.25)
     path = render_history(csv, tmp_path / "history.png", p)
@@ -130,7 +130,7 @@ def test_render_history_computes_penalties(tmp_path):
 
 def test_run_writes_series_pictures_and_shape(cli, tmp_path):
     """Issue 5 'done when': a sphere run writes the XDMF series, both PNGs, and its shape."""
-    from fem_ade.xdmf import read_series
+    from fem_ade.store.xdmf import read_series
 
     out = tmp_path / "D"
     r = cli(["sphere", "--n", "24", "--allow-underresolved", "--steps", "20", "--every", "5",
@@ -158,7 +158,7 @@ def test_default_fem_run_writes_the_series_and_pictures(cli, tmp_path):
     n = 48; the default suite runs the same at n = 24: test_fem_run_writes_...)."""
     import json
 
-    from fem_ade.xdmf import read_series
+    from fem_ade.store.xdmf import read_series
 
     out = tmp_path / "D"
     r = cli(["sphere", "--steps", "20", "--out", out, "--quiet"])
@@ -174,7 +174,7 @@ def test_default_fem_run_writes_the_series_and_pictures(cli, tmp_path):
 
 def test_fem_run_writes_the_series_and_pictures(cli, tmp_path):
     """A FEM run writes φ and μ to its series (first and last state), both PNGs and its shape."""
-    from fem_ade.xdmf import read_series
+    from fem_ade.store.xdmf import read_series
 
     out = tmp_path / "D"
     r = cli(["sphere", "--n", "24", "--allow-underresolved", "--steps", "6", "--out", out,

@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fem_ade import output
-from fem_ade.lock import LOCK_NAME, OWNER_NAME
-from fem_ade.output import read_history
-from fem_ade.xdmf import read_series
+from fem_ade.store import output
+from fem_ade.store.lock import LOCK_NAME, OWNER_NAME
+from fem_ade.store.output import read_history
+from fem_ade.store.xdmf import read_series
 
 #: a run of a few seconds (long enough to meet a second process), and a short one
 LONG = ["discocyte", "--n", "24", "--allow-underresolved", "--steps", "600", "--every", "10",
@@ -255,9 +255,9 @@ def test_signal_mid_run_is_one_line_and_130(tmp_path, sig):
 def test_signal_in_the_final_write_waits_for_it(tmp_path, monkeypatch):
     """A signal that arrives while the run's last files are written is held until they are
     whole, then ends the run with exit 130 (it used to end with 0)."""
-    from fem_ade import interrupt
-    from fem_ade import runs as runs_mod
-    from fem_ade.run import main
+    from fem_ade.cli.run import main
+    from fem_ade.engine import runs as runs_mod
+    from fem_ade.store import interrupt
 
     finish = runs_mod._finish
 
@@ -279,8 +279,8 @@ def test_results_are_written_before_the_analysis(tmp_path, monkeypatch, capsys):
     before the shape analysis, the sharp comparison and the pictures; a failure there (a
     MemoryError while VTK is imported, say) is reported and leaves them: exit 0, summary's
     ``analysis`` says why."""
-    from fem_ade.backend import BackendBase
-    from fem_ade.run import main
+    from fem_ade.backends.base import BackendBase
+    from fem_ade.cli.run import main
 
     seen = {}
 
@@ -306,8 +306,8 @@ def test_results_are_written_before_the_analysis(tmp_path, monkeypatch, capsys):
 def test_disk_full_mid_run_keeps_the_last_checkpoint(tmp_path, monkeypatch, capsys):
     """ENOSPC while the history is written after step 30 (a checkpoint at 20): one line,
     exit 3, the checkpoint at step 20 kept — and the run resumes from it."""
-    from fem_ade import output
-    from fem_ade.run import main
+    from fem_ade.cli.run import main
+    from fem_ade.store import output
 
     write = output.HistoryWriter.write
 
@@ -352,7 +352,7 @@ def test_disk_full_on_a_real_small_file_system(tmp_path):
 # --- the Python API checks its arguments before any work ------------------------------------
 def test_api_arguments(tmp_path):
     from fem_ade import simulate
-    from fem_ade.model import ModelError
+    from fem_ade.model.params import ModelError
 
     out = tmp_path / "R"
     r = simulate("sphere", n=16, steps=2, allow_underresolved=True, render=False)
@@ -374,9 +374,9 @@ def test_one_run_configuration(tmp_path, cli):
     """The command line and the API build the same RunConfig; run.json is it (with the scene
     as run) and reads back to it; a run.json that lacks a choice is refused by name."""
     from fem_ade import simulate
-    from fem_ade.config import RunConfig
-    from fem_ade.model import ModelError
-    from fem_ade.scenes import SCENES
+    from fem_ade.engine.config import RunConfig
+    from fem_ade.model.params import ModelError
+    from fem_ade.scenes.catalogue import SCENES
 
     r = cli(["sphere", "--n", "16", "--steps", "3", "--allow-underresolved", "--no-render",
              "--dt", "2e-7", "--out", tmp_path / "cli"])
@@ -397,7 +397,7 @@ def test_one_run_configuration(tmp_path, cli):
         RunConfig.build(SCENES["sphere"], dt=-1.0, adaptive=True)
     # the scene as run: a seeded FEM run of order 2 on 16 nodes (8 cells) records the torus
     # it started from and its 16 points per axis, whose default n is the run's again
-    from fem_ade.scenes import scene_from_mapping
+    from fem_ade.scenes.catalogue import scene_from_mapping
 
     simulate("torus", backend="fem", n=16, steps=1, ic="seeded", allow_underresolved=True,
              render=False, backend_options={"order": 2}, out=tmp_path / "seeded")
@@ -447,9 +447,10 @@ def test_a_signal_right_after_a_step_keeps_its_row(tmp_path, monkeypatch):
     checkpoint) waits for them: the run stops at that step with its row written, and the
     resumed run ends with the uninterrupted history. The random-kill test once lost the row of
     step 60 so (a SIGTERM there: the checkpoint at 60 without its row)."""
-    from fem_ade import interrupt, loop
-    from fem_ade.runs import resume, simulate
-    from fem_ade.scenes import get_scene
+    from fem_ade.engine import loop
+    from fem_ade.engine.runs import resume, simulate
+    from fem_ade.scenes.catalogue import get_scene
+    from fem_ade.store import interrupt
 
     kw = dict(backend="spectral", n=16, steps=20, every=5, checkpoint_every=7, render=False,
               allow_underresolved=True)

@@ -1,14 +1,14 @@
 """Seeded initial conditions (``--ic seeded``): the paper figure's shape, sized so that its
-diffuse V and A are α and β on the scene's own grid (fem_ade.seeds)."""
+diffuse V and A are α and β on the scene's own grid (fem_ade.scenes.seeds)."""
 
 import numpy as np
 import pytest
 
-from fem_ade.backend import make_backend
-from fem_ade.model import ModelError
-from fem_ade.scenes import PAPER_SCENES
-from fem_ade.seeds import NO_SEED, SIZES
-from fem_ade.shape import describe
+from fem_ade.analysis.shape import describe
+from fem_ade.backends.base import make_backend
+from fem_ade.model.params import ModelError
+from fem_ade.scenes.catalogue import PAPER_SCENES
+from fem_ade.scenes.seeds import NO_SEED, SIZES
 
 
 @pytest.mark.parametrize("name", list(SIZES))

@@ -1,4 +1,4 @@
-"""Shape descriptors (fem_ade.shape) on analytic phase fields φ = tanh(s/(√2ε)), 64³ grid.
+"""Shape descriptors (fem_ade.analysis.shape) on analytic phase fields φ = tanh(s/(√2ε)), 64³ grid.
 
 s is the signed distance (exact for spheres and the torus, first-order for ellipsoids);
 stars are unions (max of s) of ellipsoids.
@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from fem_ade.shape import describe, euler_characteristic, extract_surface
+from fem_ade.analysis.shape import describe, euler_characteristic, extract_surface
 
 N, L, EPS = 64, 1.0, 0.025
 C = (0.5, 0.5, 0.5)
@@ -151,7 +151,7 @@ def test_no_surface():
 def _classified(ic, n=48, eps=0.02):
     import math
 
-    from fem_ade.shape import describe
+    from fem_ade.analysis.shape import describe
 
     x = np.arange(n) / n
     s, _ = ic.level(np.stack(np.meshgrid(x, x, x, indexing="ij")), 1.0)
@@ -159,7 +159,15 @@ def _classified(ic, n=48, eps=0.02):
 
 
 def _shapes():
-    from fem_ade.initial import Capsule, Discocyte, Ellipsoid, Sphere, Spheres, Starfish, Torus
+    from fem_ade.scenes.initial import (
+        Capsule,
+        Discocyte,
+        Ellipsoid,
+        Sphere,
+        Spheres,
+        Starfish,
+        Torus,
+    )
 
     c = (0.5, 0.5, 0.5)
     return {

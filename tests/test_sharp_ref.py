@@ -163,11 +163,12 @@ def test_oblate_stomatocyte_transition():
 
 
 def test_a_run_meets_its_sharp_shape(monkeypatch):
-    """fem_ade.sharp.compare: a final shape labelled prolate at v = 0.8 is set beside the sharp
+    """fem_ade.analysis.sharp.compare: a final shape labelled prolate at v = 0.8 is set beside the
+    sharp
     prolate there (e = 1.38744), with the run's e = (W + G)/(16√2πκ/3); no comparison for a
     shape without a branch or of several bodies; a branch missing there is said so."""
-    from fem_ade.model import Params
-    from fem_ade.sharp import SPHERE_W, compare
+    from fem_ade.analysis.sharp import SPHERE_W, compare
+    from fem_ade.model.params import Params
 
     p = Params(eps=0.02, alpha=0.02, beta=0.5, effects={"bending", "volume", "area"})
     shape = {"components": 1, "label": "prolate",
@@ -181,12 +182,12 @@ def test_a_run_meets_its_sharp_shape(monkeypatch):
     assert compare(p, shape, {"W": 1.0}, points=49) is None  # 0.98 points per ε
     assert compare(p, shape, {"W": 1.0}, points=50)["branch"] == "prolate"
     assert compare(p, {**shape, "components": 2}, {"W": 1.0}) is None
-    import fem_ade.sharp
+    import fem_ade.analysis.sharp
 
     def nowhere(branch, v, *args):  # what sharp_ref says where a branch does not exist
         raise BranchError(f"no {branch} here: the meridian crosses itself")
 
-    monkeypatch.setattr(fem_ade.sharp, "solve_cached", nowhere)
+    monkeypatch.setattr(fem_ade.analysis.sharp, "solve_cached", nowhere)
     missing = compare(p, {**shape, "label": "oblate"}, {"W": 1.0})
     assert missing["missing"].startswith("no oblate here")
     assert missing["line"].startswith("no sharp oblate at v = 0.800 to compare with")

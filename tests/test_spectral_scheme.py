@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from fem_ade.loop import run_loop
-from fem_ade.scenes import get_scene
+from fem_ade.engine.loop import run_loop
+from fem_ade.scenes.catalogue import get_scene
 from spectral_ref import SpectralBackend
 
 

@@ -2,8 +2,8 @@
 
 import pytest
 
-from fem_ade.loop import run_loop
-from fem_ade.scenes import get_scene, sphere_values
+from fem_ade.engine.loop import run_loop
+from fem_ade.scenes.catalogue import get_scene, sphere_values
 from spectral_ref import SpectralBackend
 
 

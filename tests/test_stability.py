@@ -9,9 +9,9 @@ import json
 import numpy as np
 import pytest
 
-from fem_ade.loop import AdaptiveDt, run_loop
-from fem_ade.output import read_history
-from fem_ade.scenes import PAPER_SCENES, get_scene
+from fem_ade.engine.loop import AdaptiveDt, run_loop
+from fem_ade.scenes.catalogue import PAPER_SCENES, get_scene
+from fem_ade.store.output import read_history
 from spectral_ref import SpectralBackend
 
 
@@ -153,7 +153,7 @@ def test_printed_initial_conditions(name):
 def test_fem_variants_run_with_decaying_energy(options):
     """Hard cases of the FEM: high orders, a graded mesh, a cheap smoother, AMG on the low-order
     refined operator (paper's scheme, the thin initial interface)."""
-    from fem_ade.backend import make_backend
+    from fem_ade.backends.base import make_backend
 
     scene = get_scene("discocyte")
     n = 24 // options.get("order", 1)
@@ -172,7 +172,7 @@ def test_fem_exact_solvers_agree_over_long_runs(name, scheme, dt, accelerate):
     diagonalization — take the same 300 steps to round-off, also where the paper's scheme
     grows some modes (Δt = ε³/10: by 1.11 per step) and under momentum. (The FEM's state is
     nodal: nothing a transform cannot see can build up in it.)"""
-    from fem_ade.backend import make_backend
+    from fem_ade.backends.base import make_backend
 
     scene = get_scene(name)
     phis = {}

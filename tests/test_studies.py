@@ -239,7 +239,7 @@ def check_regenerate(result, out):
     studies = {p.stem for p in SCRIPTS} - {"regenerate"}
     assert set(result) == studies, set(result) ^ studies
     assert all("--out studies/results" in line for line in result.values()), result
-    from fem_ade.sweep import load_sweep
+    from fem_ade.campaigns.sweep import load_sweep
 
     regenerate = _load(STUDIES / "regenerate.py")
     listed = regenerate.SWEEPS
@@ -451,7 +451,7 @@ def test_gallery_keeps_an_interrupted_run(tmp_path):
     left out; a kick skipped because its case did not end steady is not looked at."""
     import json
 
-    from fem_ade.jobs import record_failure
+    from fem_ade.engine.jobs import record_failure
 
     gallery = _load(STUDIES / "gallery.py")
     case = gallery.plan(["discocyte"], ["spectral"], ["b"], quick=True)[0]
@@ -626,7 +626,7 @@ def test_seeded_runs_are_points_of_one_sweep(tmp_path):
     a second call finds them done and runs nothing."""
     from types import SimpleNamespace
 
-    from fem_ade.runs import recipe, simulate
+    from fem_ade.engine.runs import recipe, simulate
 
     sharp_limit = _load(STUDIES / "sharp_limit.py")
     cache = sharp_limit.Cache(tmp_path / "solves.json")

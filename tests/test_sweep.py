@@ -1,4 +1,5 @@
-"""Parameter sweeps on Dask (fem_ade.sweep): the file, the points, a run on a LocalCluster of
+"""Parameter sweeps on Dask (fem_ade.campaigns.sweep): the file, the points, a run on a
+LocalCluster of
 two processes, its skip of finished points, a failed point, the table's columns, and a sweep
 killed twice that ends with the table of an uninterrupted one."""
 
@@ -16,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from fem_ade.model import ModelError
-from fem_ade.sweep import COLUMNS, load_sweep, main, read_table, run_sweep
+from fem_ade.campaigns.sweep import COLUMNS, load_sweep, main, read_table, run_sweep
+from fem_ade.model.params import ModelError
 
 ROOT = Path(__file__).resolve().parents[1]
 #: spheres seeded at v < 1 need no sharp solve: the quickest vesicle points
@@ -192,7 +193,7 @@ def test_slurm_config(tmp_path, monkeypatch):
 def test_sweep_point_in_the_axisymmetric_geometry(tmp_path):
     """``geometry = "axisymmetric"`` in [run] runs a point on the FEM's (r, z) half-plane
     (docs/model.md §11): its run folder says so, its row has the end state."""
-    from fem_ade.sweep import run_point
+    from fem_ade.campaigns.sweep import run_point
 
     text = SWEEP.format(axes="[0.9]", steps=30).replace('backend = "spectral"\nn = 16',
                                                        'backend = "fem"\ngeometry = '
@@ -378,10 +379,10 @@ BAD_LISTED_BRANCHES = [
 
 
 def test_a_sweep_listed_in_code_is_the_sweep_file_s(tmp_path):
-    """fem_ade.sweep.listed_sweep (the studies' sweeps built from their plans) makes the
+    """fem_ade.campaigns.sweep.listed_sweep (the studies' sweeps built from their plans) makes the
     points a sweep file listing the same tables makes: the same names and identities, runs
     and branches alike; and it checks them as load_sweep does."""
-    from fem_ade.sweep import listed_sweep
+    from fem_ade.campaigns.sweep import listed_sweep
 
     path = tmp_path / "l.toml"
     path.write_text('name = "b"\nseeds = ["prolate"]\n[branch]\nparam = "v"\nfrom = 0.95\n'
@@ -573,7 +574,7 @@ def test_listed_points_start_from_each_others_end(tmp_path, capsys):
     assert main([str(path), "--out", str(out)]) == 0  # again: nothing runs
     assert "3 points, 3 done, 0 to run" in capsys.readouterr().out
     # a at other settings: a refused, and b and c with it (each is where it starts from)
-    from fem_ade.sweep import changed
+    from fem_ade.campaigns.sweep import changed
 
     other = load_sweep(_write(tmp_path / "other.toml",
                               CHAIN.replace("max_steps = 12", "max_steps = 11")))
@@ -588,8 +589,8 @@ def _write(path: Path, text: str) -> Path:
 def test_a_point_after_a_failed_one_fails_with_the_reason(tmp_path):
     """a failed (its record, as a sweep writes it): b is recorded as failed, with a's
     status named, and c after b too; nothing of theirs runs."""
-    from fem_ade.jobs import record_failure
-    from fem_ade.output import write_json_atomic
+    from fem_ade.engine.jobs import record_failure
+    from fem_ade.store.output import write_json_atomic
 
     sweep = load_sweep(_write(tmp_path / "chain.toml", CHAIN))
     out = tmp_path / "out"
@@ -607,7 +608,7 @@ def test_a_point_after_a_failed_one_fails_with_the_reason(tmp_path):
 def test_a_point_waits_while_its_start_has_not_ended(tmp_path):
     """b's start a has not ended (not run yet, or a checkpoint another process holds): b is
     ``busy`` (the driver asks again later) and nothing of b's is written."""
-    from fem_ade.sweep import run_point
+    from fem_ade.campaigns.sweep import run_point
 
     b = load_sweep(_write(tmp_path / "chain.toml", CHAIN)).points()[1]
     r = run_point(b, str(tmp_path))
@@ -642,7 +643,7 @@ def test_sweep_workers_keep_the_dynamic_mmap_threshold():
     sets it."""
     from dask.distributed import Client, LocalCluster
 
-    from fem_ade.sweep import connect
+    from fem_ade.campaigns.sweep import connect
 
     os.environ.pop("MALLOC_TRIM_THRESHOLD_", None)  # (a nanny sets it in its own process too)
     client, cluster = connect(None, 1)
@@ -661,8 +662,8 @@ def test_a_listed_point_with_a_scene_of_its_own(tmp_path, capsys):
     """A listed point's base may be a scene's table (what scene_to_mapping makes of a scene
     built in code): it runs as that scene does (the same end as the named scene's point);
     a table that is no scene is one line before anything runs."""
-    from fem_ade.scenes import get_scene, scene_to_mapping
-    from fem_ade.sweep import Sweep, check_sweep
+    from fem_ade.campaigns.sweep import Sweep, check_sweep
+    from fem_ade.scenes.catalogue import get_scene, scene_to_mapping
 
     own = scene_to_mapping(get_scene("discocyte"))
     run = {"backend": "spectral", "n": 16, "steps": 4, "render": False,
@@ -686,13 +687,13 @@ def test_the_check_before_anything_runs_solves_no_sharp_seed(monkeypatch):
     of 0.3–10 s each: minimal.toml's first point, the prolate at v = 0.5, took 20 s before any
     point ran); the seed is solved where the point runs. The committed sweep files load with
     the sharp solver made to fail."""
-    import fem_ade.sharp
-    from fem_ade.scenes import vesicle_scene
+    import fem_ade.analysis.sharp
+    from fem_ade.scenes.catalogue import vesicle_scene
 
     def no_solve(*args):
         raise AssertionError(f"a sharp solve in the check: {args}")
 
-    monkeypatch.setattr(fem_ade.sharp, "solve_cached", no_solve)
+    monkeypatch.setattr(fem_ade.analysis.sharp, "solve_cached", no_solve)
     for name in ("minimal", "ade", "eps_ladder"):
         assert load_sweep(ROOT / "studies" / "sweeps" / f"{name}.toml").points()
     with pytest.raises(AssertionError, match="a sharp solve"):  # a scene to run has its seed
@@ -704,11 +705,11 @@ def test_the_check_before_anything_runs_solves_no_sharp_seed(monkeypatch):
 def test_a_local_cluster_only_for_points_to_run(tmp_path, monkeypatch):
     """A local cluster has no more workers than points to run, and a sweep whose points
     have all ended starts none: its table again, the same."""
-    import fem_ade.sweep
+    import fem_ade.campaigns.sweep
 
     asked = []
-    connect = fem_ade.sweep.connect
-    monkeypatch.setattr(fem_ade.sweep, "connect",
+    connect = fem_ade.campaigns.sweep.connect
+    monkeypatch.setattr(fem_ade.campaigns.sweep, "connect",
                         lambda scheduler, workers: asked.append(workers) or connect(scheduler,
                                                                                    workers))
     sweep = load_sweep(_file(tmp_path, axes="[0.9]", steps=2))

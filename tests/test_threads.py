@@ -1,11 +1,11 @@
-"""Threads set once, on purpose (fem_ade.threads): one BLAS thread during a run unless
+"""Threads set once, on purpose (fem_ade.backends.threads): one BLAS thread during a run unless
 FEM_ADE_BLAS_THREADS says otherwise, in numpy's library and scipy's both."""
 
 import pytest
 from threadpoolctl import threadpool_info
 
-from fem_ade.model import ModelError
-from fem_ade.threads import blas_threads, limit_threads, limited
+from fem_ade.backends.threads import blas_threads, limit_threads, limited
+from fem_ade.model.params import ModelError
 
 
 def _blas_threads() -> set[int]:

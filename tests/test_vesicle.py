@@ -1,4 +1,4 @@
-"""The vesicle scene family (fem_ade.vesicle): physical parameters to the model's, its seeds,
+"""The vesicle scene family (fem_ade.scenes.vesicle): physical parameters to the model's, its seeds,
 and its use from Python, TOML and the command line."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fem_ade.model import ModelError
-from fem_ade.scenes import load_scene_file, vesicle_scene
-from fem_ade.vesicle import spheroid_meridian
+from fem_ade.model.params import ModelError
+from fem_ade.scenes.catalogue import load_scene_file, vesicle_scene
+from fem_ade.scenes.vesicle import spheroid_meridian
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -102,7 +102,7 @@ def test_vesicle_mistakes_on_the_command_line_and_in_toml(tmp_path, cli):
         r = cli(["vesicle", *args, "--out", tmp_path / "x"])
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
         assert word in r.stderr and not (tmp_path / "x").exists()
-    from fem_ade.scenes import load_scene_file
+    from fem_ade.scenes.catalogue import load_scene_file
 
     path = tmp_path / "v.toml"
     path.write_text('base = "vesicle"\n[vesicle]\nv = 0.9\neps = 0.04\n[params]\neps = 0.02\n')
@@ -111,10 +111,10 @@ def test_vesicle_mistakes_on_the_command_line_and_in_toml(tmp_path, cli):
 
 
 def test_the_command_line_knows_every_vesicle_parameter():
-    """fem_ade.run's vesicle options are the Vesicle's fields (but the box's L, which the
+    """fem_ade.cli.run's vesicle options are the Vesicle's fields (but the box's L, which the
     family keeps at 1): a field added to one is added to the other."""
-    from fem_ade.run import build_parser, vesicle_options
-    from fem_ade.vesicle import Vesicle
+    from fem_ade.cli.run import build_parser, vesicle_options
+    from fem_ade.scenes.vesicle import Vesicle
 
     assert set(vesicle_options()) == set(Vesicle.__dataclass_fields__) - {"L"}
     dests = {a.dest for a in build_parser().options}
@@ -124,7 +124,7 @@ def test_the_command_line_knows_every_vesicle_parameter():
 def test_a_vesicle_seeded_on_the_torus():
     """The torus is a branch of the family (the ADE plane's lowest at v <= 0.75): its seed
     is the sharp torus's tube, a closed meridian off the axis."""
-    from fem_ade.scenes import vesicle_scene
+    from fem_ade.scenes.catalogue import vesicle_scene
 
     scene = vesicle_scene(v=0.65, branch="torus", kbar=1.4, da0=1.2, eps=0.05)
     assert not scene.ic.spheroidal and min(scene.ic.r) > 0.1

@@ -1,4 +1,4 @@
-"""XDMF time series for ParaView (fem_ade.xdmf), read back with meshio."""
+"""XDMF time series for ParaView (fem_ade.store.xdmf), read back with meshio."""
 
 import os
 
@@ -6,7 +6,7 @@ import meshio
 import numpy as np
 import pytest
 
-from fem_ade.xdmf import XdmfSeries, periodic_grid, read_series
+from fem_ade.store.xdmf import XdmfSeries, periodic_grid, read_series
 
 
 def _field(n, k):

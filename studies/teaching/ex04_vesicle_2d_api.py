@@ -36,10 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_ade.initial import Ellipsoid
-from fem_ade.model import Params
-from fem_ade.runs import simulate
-from fem_ade.scenes import Scene
+from fem_ade.engine.runs import simulate
+from fem_ade.model.params import Params
+from fem_ade.scenes.catalogue import Scene
+from fem_ade.scenes.initial import Ellipsoid
 
 OUT = Path("runs") / "teaching"  # PNGs go here unless --out
 SEMI_AXES = (0.35, 0.1)

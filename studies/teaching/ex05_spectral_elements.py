@@ -49,9 +49,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from fem_ade.fem import gll
-from fem_ade.fem.solve import DiagonalizedSolver, Eigenbasis, StepMatrix
-from fem_ade.fem.tensor import TensorSpace
+from fem_ade.backends.fem import gll
+from fem_ade.backends.fem.solve import DiagonalizedSolver, Eigenbasis, StepMatrix
+from fem_ade.backends.fem.tensor import TensorSpace
 
 OUT = Path("runs") / "teaching"  # PNGs go here unless --out
 KAPPA, EPS = 1.0, 0.05
