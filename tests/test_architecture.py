@@ -139,10 +139,11 @@ def test_the_folder_tree_is_the_layers():
     """Every module of fem_ade lives in one of LAYERS' subpackages, except the package itself,
     the registry and the five command entry modules, which only call their layer's main."""
     top = {p.stem for p in PACKAGE.glob("*.py")}
-    assert top == {"__init__", "registry", "run", "sweep", "branch", "render", "stability"}, top
+    assert top == {"__init__", "registry", "run", "sweep", "branch", "render", "stability",
+                   "switch"}, top
     dirs = {p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != "__pycache__"}
     assert dirs == set(LAYERS) - {"registry"}, dirs
-    for name in ("run", "sweep", "branch", "render", "stability"):
+    for name in ("run", "sweep", "branch", "render", "stability", "switch"):
         tree = ast.parse((PACKAGE / f"{name}.py").read_text())
         defs = [n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))]
         assert not defs, f"fem_ade/{name}.py is an entry module: it defines nothing"

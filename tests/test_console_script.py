@@ -18,13 +18,14 @@ def _script():
 
 def test_every_command_is_a_python_m_entry_module():
     root = Path(__file__).resolve().parents[1] / "fem_ade"
-    assert set(COMMANDS) == {"run", "sweep", "branch", "render", "stability"}
+    assert set(COMMANDS) == {"run", "sweep", "branch", "render", "stability",
+                             "switch"}
     for name, module in COMMANDS.items():
         assert f"from {module} import main" in (root / f"{name}.py").read_text()
 
 
 def test_help_and_unknown_command(capsys):
-    assert main(["--help"]) == 0 and "fem-ade {run,sweep,branch,render,stability}" in \
+    assert main(["--help"]) == 0 and "fem-ade {run,sweep,branch,render,stability,switch}" in \
         capsys.readouterr().out
     assert main([]) == 2
     assert main(["simulate"]) == 2

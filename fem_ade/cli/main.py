@@ -1,5 +1,5 @@
 """``fem-ade COMMAND ...``: one console script for every command, the same as
-``python -m fem_ade.COMMAND ...`` (run, sweep, branch, render, stability)."""
+``python -m fem_ade.COMMAND ...`` (run, sweep, branch, render, stability, switch)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ COMMANDS = {
     "branch": "fem_ade.campaigns.branch",
     "render": "fem_ade.plots.render",
     "stability": "fem_ade.campaigns.stability",
+    "switch": "fem_ade.campaigns.switch",
 }
 
 USAGE = "usage: fem-ade {" + ",".join(COMMANDS) + "} ...   (fem-ade COMMAND --help for its options)"

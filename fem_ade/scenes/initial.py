@@ -29,7 +29,8 @@ meridian     centre, axis (default z), r, z, scale: the surface of revolution of
              BRANCH --v V --json`` prints one (R₀ = 1: scale is R₀ in the box)
 file         path: φ of an earlier run (its folder, final.npz, or an .npz with ``phi_grid`` or
              ``phi`` on a uniform grid), resampled by periodic cubic splines; an axisymmetric
-             run's field is its (r, z) nodes' values revolved about its axis
+             run's field is its (r, z) nodes' values revolved about its axis (plus
+             ψ(r, z) cos mθ where the file holds an azimuthal mode: a branch switch's start)
 ===========  ==================================================================================
 
 Joining shapes takes the maximum of their level functions (their union) and carving one out
@@ -582,6 +583,9 @@ def load_grid_field(path: str | Path) -> np.ndarray:
 
 #: what a field file of an axisymmetric run holds besides its grid (final.npz's keys)
 MERIDIAN_KEYS = ("axis", "points", "phi")
+#: an azimuthal mode added to it in 3D, ψ(r, z) cos mθ (ψ at the same nodes; θ about the
+#: axis, from +x): the start of a branch switch (:mod:`fem_ade.campaigns.switch`)
+AZIMUTHAL_KEYS = ("azimuthal_m", "azimuthal_psi")
 
 
 def load_meridian_field(path: str | Path) -> dict | None:
@@ -596,12 +600,20 @@ def load_meridian_field(path: str | Path) -> dict | None:
             if not set(MERIDIAN_KEYS) <= set(z.files):
                 return None
             out = {k: np.array(z[k], dtype=float) for k in MERIDIAN_KEYS}
+            if set(AZIMUTHAL_KEYS) <= set(z.files):
+                out.update({k: np.array(z[k], dtype=float) for k in AZIMUTHAL_KEYS})
     except (OSError, ValueError, EOFError):
         return None
     points, phi = out["points"], out["phi"]
     if out["axis"].shape != (2,) or points.ndim != 2 or points.shape[0] != 2 or \
             phi.shape != (points.shape[1],) or tensor_axes(points) is None:
         return None
+    if "azimuthal_m" in out:
+        m = out["azimuthal_m"]
+        if m.shape != () or m != round(float(m)) or m < 1 or \
+                out["azimuthal_psi"].shape != phi.shape:
+            raise ModelError(f"{path}: an azimuthal mode needs an integer m >= 1 and psi at "
+                             "the field's nodes")
     return out
 
 
@@ -609,17 +621,28 @@ def meridian_values(m: dict, points: np.ndarray) -> np.ndarray:
     """The surface of revolution of an (r, z) field (:func:`load_meridian_field`) at 3D
     ``points`` (3, ...): the bicubic spline through its nodes (exact there: a run started
     on the same nodes starts from the same field) at r = distance from its axis; beyond its
-    nodes the nearest edge's values (the far field)."""
+    nodes the nearest edge's values (the far field). With an azimuthal mode, plus
+    ψ(r, z) cos mθ (ψ's spline; 0 beyond its nodes), clipped to [−1, 1]."""
     from scipy.interpolate import RectBivariateSpline
 
     r_nodes, z_nodes = tensor_axes(m["points"])
-    table = m["phi"].reshape(len(r_nodes), len(z_nodes))
     points = np.asarray(points, dtype=float)
-    r = np.hypot(points[0] - m["axis"][0], points[1] - m["axis"][1])
+    if points.shape[0] != 3 and "azimuthal_m" in m:
+        raise ModelError("an azimuthal mode (m >= 1) is a 3D field: start a 3D run from it")
+    dx, dy = points[0] - m["axis"][0], points[1] - m["axis"][1]
+    r = np.hypot(dx, dy)
     k = min(3, len(r_nodes) - 1, len(z_nodes) - 1)
-    spline = RectBivariateSpline(r_nodes, z_nodes, table, kx=k, ky=k, s=0)
-    values = spline.ev(np.clip(r, r_nodes[0], r_nodes[-1]),
-                       np.clip(points[2], z_nodes[0], z_nodes[-1]))
+    rc, zc = np.clip(r, r_nodes[0], r_nodes[-1]), np.clip(points[2], z_nodes[0], z_nodes[-1])
+
+    def spline(values):
+        table = values.reshape(len(r_nodes), len(z_nodes))
+        return RectBivariateSpline(r_nodes, z_nodes, table, kx=k, ky=k, s=0).ev(rc, zc)
+
+    values = spline(m["phi"])
+    if "azimuthal_m" in m:
+        inside = (r <= r_nodes[-1]) & (points[2] >= z_nodes[0]) & (points[2] <= z_nodes[-1])
+        mode = np.where(inside, spline(m["azimuthal_psi"]), 0.0)
+        values = values + mode * np.cos(float(m["azimuthal_m"]) * np.arctan2(dy, dx))
     return np.clip(values, -1.0, 1.0)
 
 

@@ -217,13 +217,36 @@ def lowest(sys_, lin, m: int, k: int = 4, sigma: float = -1e-6,
     That shift is ``sigma`` itself for a state with none below it; else it is moved down —
     past the nearest eigenvalue below (found by the same LU), then by doubling — until the
     inertia counts none below it."""
-    from fem_ade.backends.fem.direct import count_below
-
     block = mode_block(sys_, lin, m)
-    F, B = block_factor(sys_, block, sigma)
-    below = count_below(F, B)
+    B, shift, below = _clear_shift(sys_, block, sigma, tol)
     dim = block.size - len(block.constraints)
     k = min(k, dim - 2)
+    values = _lanczos(block, B, shift, k, "LA", tol) if k > 0 else np.zeros(0)
+    return ModeResult(m, np.sort(values), below, dim)
+
+
+def lowest_mode(sys_, lin, m: int, sigma: float = -1e-6,
+                tol: float = TOL) -> tuple[float, np.ndarray]:
+    """(λ, ψ): the lowest eigenvalue of block ``m`` and its eigenvector on all the space's
+    nodes (0 on the axis for m ≥ 1: ψ = O(r^m)), P_m-orthogonal to the block's zero modes and
+    scaled to max |ψ| = 1 with its largest value positive — the shape ψ(r, z) cos mθ of the
+    block's softest perturbation (what a branch switches along)."""
+    block = mode_block(sys_, lin, m)
+    B, shift, _ = _clear_shift(sys_, block, sigma, tol)
+    values, vectors = _lanczos(block, B, shift, 1, "LA", tol, vectors=True)
+    psi = np.zeros(sys_.space.n_dofs)
+    psi[block.free] = vectors[:, 0]
+    psi /= psi[np.argmax(np.abs(psi))]
+    return float(values[0]), psi
+
+
+def _clear_shift(sys_, block: ModeBlock, sigma: float, tol: float):
+    """(the bordered factor at a shift with no eigenvalue below it, that shift, the count
+    below ``sigma``): ``sigma`` itself where none is below it (see :func:`lowest`)."""
+    from fem_ade.backends.fem.direct import count_below
+
+    F, B = block_factor(sys_, block, sigma)
+    below = count_below(F, B)
     shift = sigma
     if below:
         nearest = _lanczos(block, B, sigma, 1, "SA", tol)[0]  # the nearest below σ
@@ -234,13 +257,14 @@ def lowest(sys_, lin, m: int, k: int = 4, sigma: float = -1e-6,
             if count_below(F, B) == 0:
                 break
             step *= 4.0
-    values = _lanczos(block, B, shift, k, "LA", tol) if k > 0 else np.zeros(0)
-    return ModeResult(m, np.sort(values), below, dim)
+    return B, shift, below
 
 
-def _lanczos(block: ModeBlock, B, shift: float, k: int, which: str, tol: float):
+def _lanczos(block: ModeBlock, B, shift: float, k: int, which: str, tol: float,
+             vectors: bool = False):
     """ARPACK's shift-invert Lanczos on H v = λ P v with the bordered (H − shift·P)⁻¹ ``B``:
-    the k eigenvalues nearest above the shift (``which="LA"``) or below it (``"SA"``)."""
+    the k eigenvalues nearest above the shift (``which="LA"``) or below it (``"SA"``);
+    ``vectors``: (eigenvalues, eigenvectors as columns)."""
     from scipy.sparse.linalg import LinearOperator, eigsh
 
     n = block.size
@@ -250,5 +274,6 @@ def _lanczos(block: ModeBlock, B, shift: float, k: int, which: str, tol: float):
     rng = np.random.default_rng(1)
     v0 = B.solve(block.P(rng.standard_normal(n)))[0]  # in the constrained space
     ncv = min(n - len(block.constraints) - 1, max(2 * k + 2, MIN_NCV))
-    return np.asarray(eigsh(H, k=k, M=P, sigma=shift, which=which, OPinv=OPinv, v0=v0,
-                            tol=tol, ncv=ncv, return_eigenvectors=False))
+    found = eigsh(H, k=k, M=P, sigma=shift, which=which, OPinv=OPinv, v0=v0, tol=tol,
+                  ncv=ncv, return_eigenvectors=vectors)
+    return found if vectors else np.asarray(found)

@@ -1,0 +1,206 @@
+"""Branch switching into 3D: from a bifurcation of an axisymmetric branch, where a block
+m ≥ 1 of its stability changes sign (``python -m fem_ade.branch --modes``), to the 3D state
+that the instability leads to.
+
+The start is φ(r, z) + δ ψ_m(r, z) cos mθ, revolved onto the 3D mesh: φ the branch point on
+the bifurcation's unstable side (of the two points it lies between, the one whose block m
+has a negative eigenvalue), ψ_m that block's lowest eigenvector
+(:func:`fem_ade.backends.fem.modes.lowest_mode`, max |ψ| = 1) and δ = ``delta``. One sign
+of δ is enough: for m ≥ 1, −cos mθ = cos m(θ + π/m) is the same start turned by π/m.
+
+The 3D run is an ordinary run folder (the steady recipe — the stabilized scheme, V and A
+exact — until E changes by less than :data:`UNTIL_STEADY` per step) started from that
+field, so ``python -m fem_ade.stability``, ``fem_ade.render`` and ``--resume`` read it; its
+start field, with ψ_m and m, is kept in its initial.npz and what it was switched from in its
+run.json's scene description.
+
+Why the gradient flow and not Newton: Newton goes to the nearest stationary point, which
+from a small δ is the axisymmetric saddle itself; the flow goes downhill from the saddle
+along ψ_m cos mθ, to where the instability leads — a stable non-axisymmetric state if the
+branch born there is one, or another state (axisymmetric too) if it is not. That is the
+question a negative eigenvalue raises; following an unstable non-axisymmetric branch needs
+3D continuation, which this does not do.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from fem_ade.model.params import ModelError
+
+#: max |δψ| of the start (ψ scaled to max 1): far enough from the saddle that the flow
+#: leaves it in a few hundred steps, near enough that the start is the saddle's
+DELTA = 0.1
+#: the 3D mesh's nodes per unit length per 1/ε: 64 nodes at ε = 0.02 in the unit box
+NODES_PER_EPS = 1.28
+#: the run stops where E changes by less than this per step, relative — far below the steady
+#: recipe's 1e-9, which a flow leaving a saddle meets before the unstable mode has grown
+#: (measured, the oblate at ε = 0.04, v = 0.816, m = 2: "steady" at step 100 at 1e-9, from
+#: where Newton does not converge; at 1e-14 the flow leaves the saddle at step ~300)
+UNTIL_STEADY = 1e-13
+
+
+def bifurcation(branch: str | Path, index: int) -> dict:
+    """Bifurcation ``index`` of a branch folder's bifurcations.json (``python -m
+    fem_ade.branch --modes``); ModelError (one line) if there is none or it is m = 0."""
+    path = Path(branch) / "bifurcations.json"
+    try:
+        found = json.loads(path.read_text())["bifurcations"]
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise ModelError(f"{path} is not a branch's bifurcations ({type(err).__name__}): "
+                         "follow the branch with --modes first") from None
+    if not found:
+        raise ModelError(f"{path} lists no bifurcation")
+    if not (isinstance(index, int) and 0 <= index < len(found)):
+        raise ModelError(f"{branch} has bifurcations 0 … {len(found) - 1}, not {index!r}")
+    bif = found[index]
+    if int(bif["m"]) < 1:
+        raise ModelError(f"bifurcation {index} is in mode m = 0: an axisymmetric branch is "
+                         "born there (follow it with fem_ade.branch), not a 3D one")
+    return bif
+
+
+def unstable_point(branch: str | Path, bif: dict, point: int | None = None) -> Path:
+    """The branch point of the two around ``bif`` whose block m is unstable (or point
+    number ``point``): its folder (ModelError if the branch's points are not there)."""
+    i, j = bif["between"]
+    count_i, count_j = bif["unstable"]
+    k = (i if count_i > count_j else j) if point is None else point
+    folder = Path(branch) / "points" / f"{k:04d}"
+    if not (folder / "final.npz").is_file():
+        raise ModelError(f"{folder} is not there: the branch's points are needed (a committed "
+                         "branch keeps only its table: follow it again with fem_ade.branch)")
+    return folder
+
+
+def start_fields(point: str | Path, m: int, delta: float = DELTA,
+                 grid: int = 64) -> tuple[object, dict, float]:
+    """(the point's parameters, the 3D start's fields, the block's lowest eigenvalue): the
+    point's (r, z) field and axis, ψ_m·δ at its nodes, m, and the start on a uniform grid of
+    ``grid``³ nodes (``phi_grid``: what a field file holds for any backend)."""
+    from fem_ade.backends.fem.modes import lowest_mode
+    from fem_ade.backends.fem.newton import NewtonSystem, linearize
+    from fem_ade.campaigns.stability import _read_fields, load_state
+    from fem_ade.scenes.initial import meridian_values
+
+    if not (math.isfinite(delta) and 0 < delta <= 1):
+        raise ModelError(f"delta is the start's max |δψ|, in (0, 1], got {delta!r}")
+    be, _ = load_state(point)
+    sys_ = NewtonSystem(be)
+    lam, psi = lowest_mode(sys_, linearize(sys_, be.phi), m)
+    saved = _read_fields(Path(point) / "final.npz")
+    fields = {"axis": np.asarray(saved["axis"], dtype=float),
+              "points": np.asarray(saved["points"], dtype=float),
+              "phi": np.asarray(saved["phi"], dtype=float),
+              "azimuthal_m": np.array(float(m)), "azimuthal_psi": delta * psi}
+    L = be.params.L
+    x = np.arange(grid) * (L / grid)
+    fields["phi_grid"] = meridian_values(fields, np.stack(np.meshgrid(x, x, x,
+                                                                      indexing="ij")))
+    return be.params, fields, lam
+
+
+def default_nodes(eps: float, L: float, order: int) -> int:
+    """Nodes per axis of the 3D mesh: :data:`NODES_PER_EPS`·L/ε, up to a multiple of the
+    order."""
+    return order * math.ceil(NODES_PER_EPS * L / eps / order)
+
+
+def switch(branch: str | Path, index: int, out: str | Path, *, delta: float = DELTA,
+           n: int | None = None, order: int = 4, backend: str = "fem",
+           max_steps: int | None = None, point: int | None = None,
+           checkpoint_every: int = 200, quiet: bool = False):
+    """The 3D run from bifurcation ``index`` of a branch folder (module docstring), into the
+    run folder ``out``: its :class:`fem_ade.engine.loop.RunResult`, and a dict of what it
+    was switched from. ``point``: switch from this point of the branch instead (its block m
+    unstable: one farther from the bifurcation, where the flow leaves the saddle faster)."""
+    from fem_ade.engine.runs import recipe, simulate
+    from fem_ade.scenes.catalogue import Scene
+    from fem_ade.scenes.initial import FieldIC
+    from fem_ade.scenes.vesicle import DT_PER_EPS3
+
+    bif = bifurcation(branch, index)
+    m = int(bif["m"])
+    point = unstable_point(branch, bif, point)
+    options = {"order": order} if backend == "fem" else {}
+    with tempfile.TemporaryDirectory() as tmp:
+        params, fields, lam = start_fields(point, m, delta)
+        if lam >= 0:
+            raise ModelError(f"{point}: its block m = {m} has no negative eigenvalue "
+                             f"(lowest {lam:.3e}): nothing to switch along")
+        start = Path(tmp) / "switch.npz"
+        np.savez(start, **fields)
+        n = n or default_nodes(params.eps, params.L, order)
+        origin = {"branch": str(Path(branch).resolve()), "bifurcation": index, "m": m,
+                  "v": bif.get("v"), "point": point.name, "eigenvalue": lam, "delta": delta}
+        scene = Scene(name=f"switch-m{m}", params=params, dt=DT_PER_EPS3 * params.eps**3,
+                      ic=FieldIC(path=str(start)), n=n, dim=3,
+                      description="switched into 3D: " + json.dumps(origin))
+        kw = {**recipe("steady", scene), "until_steady": UNTIL_STEADY, "backend": backend,
+              "n": n, "phi0": str(start),
+              "sharp": False, "quiet": quiet, "checkpoint_every": checkpoint_every,
+              "backend_options": options}
+        if max_steps is not None:
+            kw["max_steps"] = max_steps
+        result = simulate(scene, out=out, **kw)
+    return result, origin
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="python -m fem_ade.switch",
+        description="Switch from a bifurcation of an axisymmetric branch (fem_ade.branch "
+                    "--modes) to the 3D state its instability leads to: a 3D run folder.")
+    ap.add_argument("branch", help="a branch folder with its points and bifurcations.json")
+    ap.add_argument("--bifurcation", type=int, default=0,
+                    help="which of bifurcations.json's (default 0, the first)")
+    ap.add_argument("--out", required=True, help="the 3D run folder to write")
+    ap.add_argument("--point", type=int, default=None,
+                    help="switch from this point of the branch (its block m unstable) "
+                         "instead of the bifurcation's nearest")
+    ap.add_argument("--delta", type=float, default=DELTA,
+                    help=f"the start's max |delta psi| (default {DELTA})")
+    ap.add_argument("--n", type=int, default=None,
+                    help=f"nodes per axis (default {NODES_PER_EPS} L/eps, up to the order)")
+    ap.add_argument("--order", type=int, default=4, help="FEM element order (default 4)")
+    ap.add_argument("--backend", choices=("fem", "spectral"), default="fem")
+    ap.add_argument("--max-steps", type=int, default=None,
+                    help="at most this many steps (default: the steady recipe's)")
+    ap.add_argument("--checkpoint-every", type=int, default=200,
+                    help="a checkpoint every K steps, for --resume (default 200)")
+    ap.add_argument("--quiet", action="store_true")
+    return ap
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+    from fem_ade.store.interrupt import install
+
+    install()  # SIGTERM as SIGINT: the run keeps its checkpoint; --resume goes on
+    try:
+        result, origin = switch(args.branch, args.bifurcation, args.out, delta=args.delta,
+                                n=args.n, order=args.order, backend=args.backend,
+                                max_steps=args.max_steps, point=args.point,
+                                checkpoint_every=args.checkpoint_every, quiet=args.quiet)
+    except ModelError as err:
+        print(f"fem_ade.switch: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"fem_ade.switch: interrupted; python -m fem_ade.run --resume {args.out} goes "
+              "on", file=sys.stderr)
+        return 130
+    print(f"switched from {origin['branch']} bifurcation {origin['bifurcation']} (m = "
+          f"{origin['m']}, point {origin['point']}, eigenvalue {origin['eigenvalue']:.3e}): "
+          f"{args.out} ({result.status})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

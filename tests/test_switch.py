@@ -1,0 +1,124 @@
+"""Branch switching into 3D (issue 44; fem_ade.campaigns.switch): the softest mode of a block
+as a field, the switched start φ + δψ cos mθ, the 3D run folder it makes, the command line's
+refusals."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from fem_ade.backends.fem.modes import lowest, lowest_mode, mode_block
+from fem_ade.backends.fem.newton import NewtonSystem, linearize
+from fem_ade.campaigns.branch import main as branch_main
+from fem_ade.campaigns.stability import load_state
+from fem_ade.campaigns.switch import main as switch_main
+from fem_ade.campaigns.switch import start_fields
+from fem_ade.model.params import ModelError
+from fem_ade.scenes.initial import load_meridian_field, meridian_values
+
+#: the oblate at ε = 0.04, R₀ = 0.25 down from v = 0.85: its block m = 2 is unstable at the
+#: first four points and crosses zero near v = 0.80 (one m = 2 bifurcation)
+OBLATE = ["vesicle", "--branch", "oblate", "--eps", "0.04", "--R0", "0.25", "--param", "v",
+          "--from", "0.85", "--to", "0.80", "--step", "0.01", "--quiet", "--modes", "3"]
+
+
+@pytest.fixture(scope="module")
+def oblate(tmp_path_factory):
+    out = tmp_path_factory.mktemp("switch") / "oblate"
+    assert branch_main([*OBLATE, "--out", str(out)]) == 0
+    bifs = json.loads((out / "bifurcations.json").read_text())["bifurcations"]
+    assert [b["m"] for b in bifs] == [2], bifs
+    return out
+
+
+def test_the_softest_mode_is_the_blocks_lowest(oblate):
+    """lowest_mode's (λ, ψ): λ is lowest's first eigenvalue, ψ solves H_m ψ = λ P_m ψ on the
+    block's free nodes (to 1e-6 of |H_m ψ|), vanishes on the axis (m ≥ 1) and is scaled to
+    max ψ = 1."""
+    be, _ = load_state(oblate / "points" / "0000")
+    sys_ = NewtonSystem(be)
+    lin = linearize(sys_, be.phi)
+    lam, psi = lowest_mode(sys_, lin, 2)
+    res = lowest(sys_, lin, 2, k=2)
+    assert lam < 0 and res.unstable == 1
+    assert lam == pytest.approx(res.eigenvalues[0], rel=1e-8)
+    block = mode_block(sys_, lin, 2)
+    x = psi[block.free]
+    Hx, Px = block.H(x), block.P(x)
+    # H_m ψ − λP_m ψ lies in the span of the zero modes' borders (none for m = 2)
+    assert np.linalg.norm(Hx - lam * Px) <= 1e-6 * np.linalg.norm(Hx)
+    r = be.space.doflocs[0]
+    assert np.all(psi[r == 0] == 0.0)
+    assert np.max(np.abs(psi)) == pytest.approx(1.0) and np.max(psi) == pytest.approx(1.0)
+
+
+def test_the_start_is_the_state_plus_its_mode(oblate, tmp_path):
+    """The start field at 3D points on a circle about the axis: the revolved state plus
+    δψ(r, z) cos 2θ, and an (r, z) file without the mode gives the state alone."""
+    params, fields, lam = start_fields(oblate / "points" / "0000", 2, delta=0.05, grid=16)
+    assert lam < 0 and fields["phi_grid"].shape == (16, 16, 16)
+    ax, ay = fields["axis"]
+    theta = np.linspace(0, 2 * np.pi, 9)[:-1]
+    r0, z0 = 0.2, float(np.median(fields["points"][1]))
+    pts = np.stack([ax + r0 * np.cos(theta), ay + r0 * np.sin(theta), np.full(8, z0)])
+    bare = {k: fields[k] for k in ("axis", "points", "phi")}
+    base, switched = meridian_values(bare, pts), meridian_values(fields, pts)
+    assert np.ptp(base) < 1e-12  # axisymmetric
+    mode = (switched - base) / np.cos(2 * theta)
+    inside = np.abs(np.cos(2 * theta)) > 0.5
+    assert np.ptp(mode[inside]) < 1e-9 and abs(mode[inside][0]) > 1e-3
+    path = tmp_path / "start.npz"
+    np.savez(path, **fields)
+    kept = load_meridian_field(path)
+    assert kept["azimuthal_m"] == 2 and np.array_equal(kept["azimuthal_psi"],
+                                                       fields["azimuthal_psi"])
+    np.savez(path, **{**fields, "azimuthal_m": np.array(0.5)})
+    with pytest.raises(ModelError, match="integer m >= 1"):
+        load_meridian_field(path)
+
+
+def test_a_switch_is_an_ordinary_run_folder(oblate, tmp_path, capsys):
+    """python -m fem_ade.switch writes a 3D run folder that says where it came from, keeps
+    its start (with the mode) and resumes."""
+    from fem_ade.cli.run import main as run_main
+
+    out = tmp_path / "switched"
+    assert switch_main([str(oblate), "--out", str(out), "--n", "32", "--max-steps", "30",
+                        "--checkpoint-every", "10", "--quiet"]) == 0
+    assert "bifurcation 0 (m = 2, point 0003" in capsys.readouterr().out
+    run = json.loads((out / "run.json").read_text())
+    origin = json.loads(run["scene"]["description"].split(": ", 1)[1])
+    assert origin["m"] == 2 and origin["point"] == "0003" and origin["eigenvalue"] < 0
+    assert run["scene"]["dim"] == 3
+    with np.load(out / "initial.npz") as z:
+        assert float(z["azimuthal_m"]) == 2 and z["azimuthal_psi"].shape == z["phi"].shape
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["steps"] == 30 and math.isfinite(summary["final"]["E"])
+    assert run_main(["--resume", str(out), "--steps", "40", "--quiet"]) == 0
+    assert json.loads((out / "summary.json").read_text())["steps"] == 40
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--bifurcation", "3"], "has bifurcations 0 … 0, not 3"),
+    (["--point", "4"], "has no negative eigenvalue"),
+    (["--delta", "2"], "delta is the start's max"),
+])
+def test_refusals_are_one_line(oblate, tmp_path, capsys, args, message):
+    out = tmp_path / "never"
+    assert switch_main([str(oblate), "--out", str(out), "--quiet", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err
+    assert not out.exists()
+
+
+def test_a_branch_without_its_points_is_refused(oblate, tmp_path, capsys):
+    """A committed branch keeps its table, not its points: say so."""
+    import shutil
+
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    for name in ("branch.json", "branch.csv", "bifurcations.json"):
+        shutil.copy(oblate / name, bare / name)
+    assert switch_main([str(bare), "--out", str(tmp_path / "x"), "--quiet"]) == 2
+    assert "the branch's points are needed" in capsys.readouterr().err
