@@ -42,6 +42,7 @@ STEPS = (
     ("azimuthal", ["studies/azimuthal.py", "--out", RESULTS]),
     ("ade_azimuthal", ["studies/ade_azimuthal.py", "--out", RESULTS]),
     ("solver_bench", ["studies/solver_bench.py", "--out", RESULTS]),
+    ("switch", ["studies/switch.py", "--out", RESULTS]),
     ("nonaxisymmetric", ["studies/nonaxisymmetric.py", "--out", RESULTS, "--eps", "0.02"]),
     ("sweep_scaling", ["studies/sweep_scaling.py", "--out", RESULTS]),
     ("phase_diagram", ["studies/phase_diagram.py", "--out", RESULTS]),
@@ -80,6 +81,8 @@ MEASUREMENTS = {"convergence": "errors and times of each resolution, in one proc
                 "sweep_scaling": "a sweep's wall time on 1 and 2 workers",
                 "solver_bench": "one point's Newton and stability by each solver, in one "
                                 "process",
+                "switch": "3D runs from switched starts and their stability, timed, in "
+                          "one process",
                 "ade_azimuthal": "one point per cell of the ADE plane and its modes, in a "
                                  "process pool (a one-point branch: a sweep's [branch] has "
                                  "no max_points)"}

@@ -383,6 +383,20 @@ def check_solver_bench(result, out):
     assert (out / "solver_bench_quick.json").is_file()
 
 
+def check_switch(result, out):
+    """At ε = 0.04 on 32³: the oblate's m = 2 saddle, switched into 3D, ends on a stable
+    steady state (Newton converges from it; no negative 3D eigenvalue) of the oblate's v,
+    elongated like the prolate and within 0.5 % of the axisymmetric prolate's e (measured:
+    −0.11 % on this coarse mesh), below the oblate's."""
+    (c,) = result["switches"]
+    assert c["status"] == "steady" and c["unstable_3d"] == 0
+    assert c["label"] in ("prolate", "cylinder") and c["e"] < c["oblate_e"]
+    assert abs(c["e"] / c["prolate_e"] - 1) < 5e-3
+    a, b, cc = c["semi_axes"]
+    assert a > 2 * b and abs(b / cc - 1) < 0.15
+    assert (out / "switch_quick.md").is_file() and (out / "switch_quick-eps=0.04.png").is_file()
+
+
 ARGS = {"readme_figure": ["--steps", "2", "--n", "24"]}
 #: where each study writes by default (under the current directory)
 DEFAULT_OUT = {"gallery": "runs/gallery", "readme_figure": "runs/readme"}

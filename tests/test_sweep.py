@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from fem_ade.campaigns.sweep import COLUMNS, load_sweep, main, read_table, run_sweep
+from fem_ade.campaigns.sweep import COLUMNS, load_sweep, main, read_sweep_table, run_sweep
 from fem_ade.model.params import ModelError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -101,7 +101,7 @@ def test_sweep_runs_skips_and_records_a_failure(tmp_path, capsys):
     assert stamps == {p: (out / "points" / p / "summary.json").stat().st_mtime_ns
                       for p in stamps}, "a finished point ran again"
     assert _table(out / "sweep.csv") == table
-    back = read_table(out / "sweep.csv")  # the table alone gives the rows back
+    back = read_sweep_table(out / "sweep.csv")  # the table alone gives the rows back
     for r, b in zip(rows, back, strict=True):
         assert b["point"] == r["point"] and b["status"] == r["status"]
         assert b.get("E") == pytest.approx(r.get("E"), rel=1e-9) if r.get("E") else True
@@ -562,7 +562,7 @@ def test_listed_points_start_from_each_others_end(tmp_path, capsys):
     path.write_text(CHAIN)
     assert [p.name for p in load_sweep(path).points()] == ["a", "b", "c"]
     assert main([str(path), "--out", str(out), "--quiet"]) == 0
-    rows = read_table(out / "sweep.csv")
+    rows = read_sweep_table(out / "sweep.csv")
     assert [(r["point"], r["after"], r["eps"]) for r in rows] == [
         ("a", "", None), ("b", "a", None), ("c", "b", 0.07)]
     assert [r["status"] for r in rows] == ["max_steps"] * 3
@@ -623,7 +623,7 @@ def test_a_point_runs_only_after_the_end_it_asks_for(tmp_path, capsys):
     path, out = _write(tmp_path / "w.toml", text), tmp_path / "out"
     assert main([str(path), "--out", str(out), "--quiet"]) == 0
     assert "1 failed, 1 skipped" in capsys.readouterr().out
-    rows = {r["point"]: r for r in read_table(out / "sweep.csv")}
+    rows = {r["point"]: r for r in read_sweep_table(out / "sweep.csv")}
     assert rows["a"]["status"] == "max_steps" and rows["b"]["status"] == "skipped"
     assert rows["b"]["reason"] == "not run: its start a ended max_steps; it runs after steady"
     assert rows["c"]["status"] == "failed" and "its start b was skipped" in rows["c"]["reason"]
@@ -720,3 +720,20 @@ def test_a_local_cluster_only_for_points_to_run(tmp_path, monkeypatch):
     again = run_sweep(sweep, out, workers=2, quiet=True)
     assert asked == [1] and again[0]["E"] == rows[0]["E"]
     assert _table(out / "sweep.csv") == table
+
+
+def test_one_table_reader_for_sweeps_and_branches(tmp_path):
+    """fem_ade.store.tables is the one CSV writer and reader of sweep.csv and branch.csv: a
+    row comes back with its numbers as numbers, its text columns as text, an empty cell as
+    the caller's ``empty``; the file is replaced whole."""
+    from fem_ade.store.tables import read_table, write_table
+
+    path = tmp_path / "t.csv"
+    rows = [{"point": "007", "v": 0.85, "steps": 12, "label": "", "x": None}]
+    write_table(path, ["point", "v", "steps", "label", "x"], rows)
+    assert path.read_text().splitlines() == ["point,v,steps,label,x", "007,0.85,12,,"]
+    assert read_table(path, text=("point", "label")) == [
+        {"point": "007", "v": 0.85, "steps": 12, "label": "", "x": None}]
+    assert read_table(path, empty="") == [
+        {"point": 7, "v": 0.85, "steps": 12, "label": "", "x": ""}]
+    assert not (tmp_path / "t.csv.tmp").exists()

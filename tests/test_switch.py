@@ -65,8 +65,10 @@ def test_the_start_is_the_state_plus_its_mode(oblate, tmp_path):
     bare = {k: fields[k] for k in ("axis", "points", "phi")}
     base, switched = meridian_values(bare, pts), meridian_values(fields, pts)
     assert np.ptp(base) < 1e-12  # axisymmetric
-    mode = (switched - base) / np.cos(2 * theta)
-    inside = np.abs(np.cos(2 * theta)) > 0.5
+    angle = 2 * (theta - float(fields["azimuthal_phase"]))
+    assert float(fields["azimuthal_phase"]) == pytest.approx(np.pi / 8)
+    mode = (switched - base) / np.cos(angle)
+    inside = np.abs(np.cos(angle)) > 0.5
     assert np.ptp(mode[inside]) < 1e-9 and abs(mode[inside][0]) > 1e-3
     path = tmp_path / "start.npz"
     np.savez(path, **fields)

@@ -52,7 +52,6 @@ branch.json stops the resume with one line.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import os
@@ -512,26 +511,22 @@ def mode_columns(rows: list[dict]) -> list[str]:
     return [f"lowest_m{m}" for m in modes] + (["unstable_3d"] if modes else [])
 
 
-def write_table(out: Path, name: str, rows: list[dict]) -> None:
-    from fem_ade.store.output import csv_cell
+def write_branch_table(out: Path, name: str, rows: list[dict]) -> None:
+    """A branch's rows as its branch.csv (:func:`fem_ade.store.tables.write_table`): the
+    point's number, the parameter ``name``, :data:`COLUMNS` and the modes' columns."""
+    from fem_ade.store.tables import write_table
 
-    cols = (name, *COLUMNS[1:], *mode_columns(rows))
-    tmp = out / "branch.csv.tmp"
-    with open(tmp, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(("point", *cols))
-        for k, r in enumerate(rows):
-            w.writerow([k] + [csv_cell(r.get(c)) for c in cols])
-    tmp.replace(out / "branch.csv")
+    cols = ["point", name, *COLUMNS[1:], *mode_columns(rows)]
+    write_table(out / "branch.csv", cols, [{**r, "point": k} for k, r in enumerate(rows)])
 
 
-def read_table(out: Path) -> list[dict]:
-    """A branch folder's branch.csv (:func:`write_table`) as rows, numbers as the ints and
-    floats they were written from ('' where a cell is empty: no fold, no stability)."""
-    from fem_ade.store.output import parse_cell
+def read_branch_table(out: Path) -> list[dict]:
+    """A branch folder's branch.csv (:func:`write_branch_table`) as rows, numbers as the
+    ints and floats they were written from ('' where a cell is empty: no fold, no
+    stability)."""
+    from fem_ade.store.tables import read_table
 
-    with open(out / "branch.csv", newline="") as fh:
-        return [{k: parse_cell(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+    return read_table(out / "branch.csv", empty="")
 
 
 def mark_folds(rows: list[dict], name: str) -> list[dict]:
@@ -759,7 +754,7 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
             done.append((row, phi.copy()))
             meridians.append((row[param], _curves(be)))
             say(_line(param, row))
-            write_table(out, param, mark_folds(rows, param))
+            write_branch_table(out, param, mark_folds(rows, param))
             ds = row["ds_next"]
         if why:
             say(why)
@@ -776,7 +771,7 @@ def _finish(out: Path, param: str, rows: list[dict], meridians: list,
     from fem_ade.store.output import write_json_atomic
 
     rows = mark_folds(rows, param)
-    write_table(out, param, rows)
+    write_branch_table(out, param, rows)
     if with_modes:
         write_json_atomic(out / "bifurcations.json",
                           {"param": param, "bifurcations": bifurcations(rows, param)})

@@ -82,7 +82,6 @@ branch behind) and ``OUT/montage.png`` (the end shapes, when the runs render).
 from __future__ import annotations
 
 import argparse
-import csv
 import itertools
 import json
 import os
@@ -95,7 +94,7 @@ from pathlib import Path
 
 from fem_ade.engine.jobs import failure_record, read_failure, record_failure
 from fem_ade.model.params import ModelError
-from fem_ade.store.output import csv_cell, write_json_atomic
+from fem_ade.store.output import write_json_atomic
 from fem_ade.store.status import ENDED, Status
 
 if sys.version_info >= (3, 11):
@@ -888,39 +887,30 @@ def _seed_sharp_e(point: Point) -> float | None:
 # ---------------------------------------------------------------------------------------
 # the driver
 # ---------------------------------------------------------------------------------------
-def write_table(rows: list[dict], path: Path, axes: list[str]) -> None:
+def write_sweep_table(rows: list[dict], path: Path, axes: list[str]) -> None:
+    """A sweep's rows as its sweep.csv (:func:`fem_ade.store.tables.write_table`): the point,
+    its axes, :data:`COLUMNS` (a branch sweep's end and folds; a listed sweep's after)."""
+    from fem_ade.store.tables import write_table
+
     cols = ["point", *axes, *COLUMNS]
     if any("end" in r for r in rows):  # a branch sweep's
         cols[cols.index("steps") + 1:cols.index("steps") + 1] = ["end", "folds"]
     if any(r.get("after") for r in rows):  # listed points that start from another's end
         cols.insert(cols.index("seed") + 1, "after")
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: csv_cell(r.get(k)) for k in cols})
-    os.replace(tmp, path)
+    write_table(path, cols, rows)
 
 
-def read_table(path: Path) -> list[dict]:
-    """The rows of a sweep.csv, numbers as numbers (what :func:`row` gives, without the run
-    folders: a committed sweep's table is enough to draw and report it again)."""
-    def parse(text):
-        if text == "":
-            return None
-        try:
-            number = float(text)
-        except ValueError:
-            return text
-        return int(number) if number.is_integer() and "." not in text and "e" not in text \
-            else number
+#: a sweep table's columns that stay text (a seed "1" is a name, not a number)
+TEXT_COLUMNS = ("point", "seed", "genus", "label", "status", "reason", "folds", "after")
 
-    with open(path, newline="") as fh:
-        return [{k: parse(v) if k not in ("point", "seed", "genus", "label", "status",
-                                          "reason", "folds", "after") else v
-                 for k, v in r.items()}
-                for r in csv.DictReader(fh)]
+
+def read_sweep_table(path: Path) -> list[dict]:
+    """The rows of a sweep.csv, numbers as numbers, empty cells None (what :func:`row` gives,
+    without the run folders: a committed sweep's table is enough to draw and report it
+    again)."""
+    from fem_ade.store.tables import read_table
+
+    return read_table(path, text=TEXT_COLUMNS, empty=None)
 
 
 def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | None = None,
@@ -979,7 +969,7 @@ def run_sweep(sweep: Sweep, out: Path, *, workers: int = 2, scheduler: str | Non
             client.close()
         if cluster is not None:
             cluster.close()
-        write_table([rows[p.name] for p in points], out / "sweep.csv", axes)
+        write_sweep_table([rows[p.name] for p in points], out / "sweep.csv", axes)
         lock.release()
     return [rows[p.name] for p in points]
 
@@ -1019,7 +1009,7 @@ def _drive(client, todo, out, rows, axes, quiet, retry_s, as_completed):
             failed += r["status"] in (Status.FAILED, Status.DIVERGED)
             bar.update(1)
             bar.set_postfix_str(f"failed {failed}, running {min(len(todo) - bar.n, n_workers)}")
-            write_table(list(rows.values()), out / "sweep.csv", axes)
+            write_sweep_table(list(rows.values()), out / "sweep.csv", axes)
     finally:
         bar.close()
     if not quiet:
@@ -1097,7 +1087,7 @@ def report_rows(sweep: Sweep, out: Path) -> list[dict]:
         raise ModelError(f"{out} holds no sweep to report on (run it first)")
     check_points(sweep, out, rerun_changed=False)
     rows = [row(p, out) for p in sweep.points()]
-    write_table(rows, out / "sweep.csv", sweep.columns())
+    write_sweep_table(rows, out / "sweep.csv", sweep.columns())
     return rows
 
 

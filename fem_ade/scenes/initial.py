@@ -583,8 +583,9 @@ def load_grid_field(path: str | Path) -> np.ndarray:
 
 #: what a field file of an axisymmetric run holds besides its grid (final.npz's keys)
 MERIDIAN_KEYS = ("axis", "points", "phi")
-#: an azimuthal mode added to it in 3D, ψ(r, z) cos mθ (ψ at the same nodes; θ about the
-#: axis, from +x): the start of a branch switch (:mod:`fem_ade.campaigns.switch`)
+#: an azimuthal mode added to it in 3D, ψ(r, z) cos m(θ − θ₀) (ψ at the same nodes; θ about
+#: the axis, from +x; θ₀ the optional ``azimuthal_phase``, default 0): the start of a branch
+#: switch (:mod:`fem_ade.campaigns.switch`)
 AZIMUTHAL_KEYS = ("azimuthal_m", "azimuthal_psi")
 
 
@@ -602,6 +603,8 @@ def load_meridian_field(path: str | Path) -> dict | None:
             out = {k: np.array(z[k], dtype=float) for k in MERIDIAN_KEYS}
             if set(AZIMUTHAL_KEYS) <= set(z.files):
                 out.update({k: np.array(z[k], dtype=float) for k in AZIMUTHAL_KEYS})
+                if "azimuthal_phase" in z.files:
+                    out["azimuthal_phase"] = np.array(z["azimuthal_phase"], dtype=float)
     except (OSError, ValueError, EOFError):
         return None
     points, phi = out["points"], out["phi"]
@@ -611,7 +614,9 @@ def load_meridian_field(path: str | Path) -> dict | None:
     if "azimuthal_m" in out:
         m = out["azimuthal_m"]
         if m.shape != () or m != round(float(m)) or m < 1 or \
-                out["azimuthal_psi"].shape != phi.shape:
+                out["azimuthal_psi"].shape != phi.shape or \
+                not np.isfinite(out.get("azimuthal_phase", 0.0)).all() or \
+                np.shape(out.get("azimuthal_phase", 0.0)) != ():
             raise ModelError(f"{path}: an azimuthal mode needs an integer m >= 1 and psi at "
                              "the field's nodes")
     return out
@@ -622,7 +627,7 @@ def meridian_values(m: dict, points: np.ndarray) -> np.ndarray:
     ``points`` (3, ...): the bicubic spline through its nodes (exact there: a run started
     on the same nodes starts from the same field) at r = distance from its axis; beyond its
     nodes the nearest edge's values (the far field). With an azimuthal mode, plus
-    ψ(r, z) cos mθ (ψ's spline; 0 beyond its nodes), clipped to [−1, 1]."""
+    ψ(r, z) cos m(θ − θ₀) (ψ's spline; 0 beyond its nodes), clipped to [−1, 1]."""
     from scipy.interpolate import RectBivariateSpline
 
     r_nodes, z_nodes = tensor_axes(m["points"])
@@ -642,7 +647,8 @@ def meridian_values(m: dict, points: np.ndarray) -> np.ndarray:
     if "azimuthal_m" in m:
         inside = (r <= r_nodes[-1]) & (points[2] >= z_nodes[0]) & (points[2] <= z_nodes[-1])
         mode = np.where(inside, spline(m["azimuthal_psi"]), 0.0)
-        values = values + mode * np.cos(float(m["azimuthal_m"]) * np.arctan2(dy, dx))
+        theta = np.arctan2(dy, dx) - float(m.get("azimuthal_phase", 0.0))
+        values = values + mode * np.cos(float(m["azimuthal_m"]) * theta)
     return np.clip(values, -1.0, 1.0)
 
 
