@@ -191,3 +191,29 @@ def test_classify_names_each_kind_of_shape(label):
     d = _classified(_shapes()[label])
     print(label, "->", d["label"], d["body"])
     assert d["label"] == label
+
+
+#: the shapes of _shapes() that are surfaces of revolution about z
+ROUND = ("sphere", "prolate", "oblate", "discocyte", "torus", "gourd", "chain", "cylinder",
+         "nested", "2 vesicles")
+
+
+@pytest.mark.parametrize("label", ROUND)
+def test_one_classifier_for_both_geometries(label):
+    """The same shape, described in 3D (its φ = 0 surface) and in the axisymmetric geometry
+    (its φ = 0 meridians, order 8 at 2.5 nodes per ε), gets the same label from the one
+    decision tree (fem_ade.analysis.shape.classify) — issue 41: the two geometries had two
+    trees that had drifted apart."""
+    from fem_ade.backends.base import make_backend
+    from fem_ade.backends.fem.axisym import default_cells
+    from fem_ade.model.params import Params
+    from fem_ade.scenes.catalogue import Scene
+
+    ic = _shapes()[label]
+    params = Params(eps=0.02, alpha=0.05, beta=0.8)
+    scene = Scene(label, params, 1e-7, ic, n=48)
+    be = make_backend("fem", scene, n=default_cells(0.02, 1.0, 8), order=8,
+                      geometry="axisymmetric")
+    shape, _ = be.describe_final(be.diagnostics())
+    assert _classified(ic)["label"] == label
+    assert shape["label"] == label, shape

@@ -20,9 +20,10 @@ in the half-plane instead of a triangulated 3D surface — exact to the element'
    direction in the plane), elongation and flatness, necks along z, the dimple (thickness
    along z at the axis over the largest), the skewness of z (a pear), and the depth of each
    pole below the highest point of its side (a stomatocyte's invaginated pole).
-5. **Label** (:func:`classify`): the labels of :func:`fem_ade.analysis.shape.classify`, and
-   ``stomatocyte`` (one pole invaginated) and ``pear`` (a prolate whose z-skewness exceeds
-   :data:`PEAR`), which the 3D descriptors do not tell.
+5. **Label**: :func:`fem_ade.analysis.shape.classify`, the one decision tree of both
+   geometries, which on these descriptors also says ``stomatocyte`` (one pole invaginated)
+   and ``pear`` (a prolate whose z-skewness exceeds :data:`fem_ade.analysis.shape.PEAR`):
+   what the 3D descriptors do not tell.
 """
 
 from __future__ import annotations
@@ -32,17 +33,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fem_ade.analysis.shape import CYLINDER, DIMPLE, OBLATE, PROLATE, count_necks
+from fem_ade.analysis.shape import classify, count_necks
 from fem_ade.model.params import reduced_area_difference, reduced_volume
 
 #: the contour grid: each gap between nodes split into this many
 REFINE = 4
-#: |skewness of z| above which an elongated body without a neck is a pear (a prolate has 0;
-#: sharp_ref's pear at v = 0.85 next to where it leaves the prolate, 0.2)
-PEAR = 0.1
-#: a pole is invaginated when it lies more than this fraction of the body's height below the
-#: highest point on its side; a stomatocyte has one such pole, a discocyte two
-INVAGINATED = 0.02
 
 
 @dataclass
@@ -254,40 +249,6 @@ def pole_depths(pts: np.ndarray) -> tuple[float, float, float]:
     z = pts[:, 1]
     top, bottom = max(z[0], z[-1]), min(z[0], z[-1])
     return float(z.max() - top), float(bottom - z.min()), float(z.max() - z.min())
-
-
-def classify(d: dict) -> str:
-    """One name for the descriptors (module docstring)."""
-    nc = d["components"]
-    if nc == 0:
-        return "no membrane"
-    if any(d["wraps"]):
-        return "wrapping"
-    if d["nested"]:
-        return "nested"
-    if nc > 1:
-        return f"{nc} vesicles"
-    if d["genus"][0]:
-        return "torus"
-    body = d.get("body")
-    if body is None:
-        return "wrapping"
-    if body["necks"] >= 2:
-        return "chain"
-    if body["necks"] == 1:
-        return "gourd"
-    top, bottom = d["pole_depths"][:2]
-    height = d["pole_depths"][2]
-    dented = [x > INVAGINATED * height for x in (top, bottom)]
-    if any(dented) and not all(dented):
-        return "stomatocyte"
-    if body["elongation"] > PROLATE:
-        if body["elongation"] > CYLINDER:
-            return "cylinder"
-        return "pear" if abs(body["skewness"]) > PEAR else "prolate"
-    if body["flatness"] < OBLATE:
-        return "discocyte" if body["dimple"] > DIMPLE else "oblate"
-    return "sphere"
 
 
 def describe_meridians(M: Meridians, *, V=None, A=None, dA=None, D=None) -> dict:

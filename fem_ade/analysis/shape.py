@@ -51,8 +51,10 @@ Descriptors
   ``elongation`` a₁/a₂ and ``flatness`` a₃/a₂, the ``necks`` along the long axis (minima of
   the cross-section area below 85 % of the smaller maximum beside them) and the ``dimple``
   1 − (thickness at the centre)/(largest thickness) across the short axis (> 0: biconcave).
-* ``label``: a name for all of it (:func:`classify`): sphere, prolate, oblate, discocyte,
-  cylinder, gourd, chain, torus, genus-g, starfish-k, nested, k vesicles.
+* ``label``: a name for all of it (:func:`classify`, the one decision tree of both
+  geometries): sphere, prolate, oblate, discocyte, cylinder, gourd, chain, torus, genus-g,
+  starfish-k, nested, k vesicles, wrapping, no membrane; and from an axisymmetric run's
+  meridians also stomatocyte and pear.
 """
 
 from __future__ import annotations
@@ -609,6 +611,12 @@ DIMPLE = 0.08
 PROLATE, CYLINDER = 1.15, 2.2
 #: flatness a₃/a₂ below which a body is oblate
 OBLATE = 0.85
+#: |skewness along the axis| above which an elongated body without a neck is a pear (a
+#: prolate has 0; sharp_ref's pear at v = 0.85 next to where it leaves the prolate, 0.2)
+PEAR = 0.1
+#: a pole is invaginated when it lies more than this fraction of the body's height below the
+#: highest point on its side; a stomatocyte has one such pole, a discocyte two
+INVAGINATED = 0.02
 
 
 def count_necks(area: np.ndarray) -> tuple[int, float]:
@@ -673,10 +681,16 @@ def body_geometry(S: Surface) -> dict | None:
 
 
 def classify(d: dict) -> str:
-    """One name for the descriptors of :func:`describe` (see the module docstring)."""
+    """One name for the descriptors of a 3D surface (:func:`describe`) or of an
+    axisymmetric run's meridians (:func:`fem_ade.analysis.axishape.describe_meridians`):
+    the one decision tree of both geometries (the module docstring). What only the meridians
+    can tell — an invaginated pole (``pole_depths``: a stomatocyte) and the skewness along
+    the axis (a pear) — is asked where the descriptors hold it."""
     nc = d["components"]
     if nc == 0:
         return "no membrane"
+    if any(d.get("wraps", ())):
+        return "wrapping"
     if d["nested"]:
         return "nested"
     if nc > 1:
@@ -693,8 +707,15 @@ def classify(d: dict) -> str:
         return "chain"
     if body["necks"] == 1:
         return "gourd"
+    if "pole_depths" in d:
+        top, bottom, height = d["pole_depths"][:3]
+        dented = [x > INVAGINATED * height for x in (top, bottom)]
+        if any(dented) and not all(dented):
+            return "stomatocyte"
     if body["elongation"] > PROLATE:
-        return "cylinder" if body["elongation"] > CYLINDER else "prolate"
+        if body["elongation"] > CYLINDER:
+            return "cylinder"
+        return "pear" if abs(body.get("skewness", 0.0)) > PEAR else "prolate"
     if body["flatness"] < OBLATE:
         return "discocyte" if body["dimple"] > DIMPLE else "oblate"
     return "sphere"
