@@ -100,13 +100,13 @@ def make_cell(args) -> str | None:
 def summarize(root: Path, todo: list[dict], modes: int) -> dict:
     """Per cell: the shape its point is, its 3D unstable count, the modes below the
     threshold, its lowest eigenvalue in units of (ε/R₀)⁴ and whether that is marginal."""
-    from fem_ade.campaigns.branch import read_table, same_branch
+    from fem_ade.campaigns.branch import read_branch_table, same_branch
     from fem_ade.campaigns.stability import UNSTABLE, shape_scale
 
     out = []
     for cell in todo:
         folder = root / cell_name(cell)
-        rows = read_table(folder) if (folder / "branch.csv").is_file() else []
+        rows = read_branch_table(folder) if (folder / "branch.csv").is_file() else []
         entry = {**cell, "label": None, "same": None, "unstable_3d": None, "modes_below": [],
                  "lowest": None, "lowest_m": None, "marginal": None}
         failed = folder / "failed.txt"

@@ -78,7 +78,7 @@ ANCHORS = {"prolate": (1.2, 1.0, 1.6), "pear": (1.64, 1.6, 1.52), "oblate": (1.0
            "stomatocyte": (0.8, 0.92, 1.04), "torus": (1.2, 1.0, 1.4)}
 #: a genus-0 point whose label names neither branch of its pair is the one whose sharp da is
 #: nearest its surface's, within this (the pear's da is 0.17–0.2 above the prolate's, the
-#: stomatocyte's 0.2–0.6 below the oblate's: ``studies/ade_plane.md``; at ε/R₀ = 0.06 the
+#: stomatocyte's 0.2–0.6 below the oblate's: ``studies/results/ade_plane.md``; at ε/R₀ = 0.06 the
 #: stomatocyte's surface da is 0.1 below the sharp one's)
 DA_TOL = 0.15
 #: --quick: one line, two branches, a short span, coarse
@@ -214,7 +214,7 @@ def archive_line(folder: Path, key: dict) -> dict:
     """A followed line's archive entry: its rows (branch.csv, the columns the report reads),
     or why it has none (its failure record's reason), and its seconds (the task's wall
     time: the seed and every Newton point)."""
-    from fem_ade.campaigns.branch import read_table
+    from fem_ade.campaigns.branch import read_branch_table
     from fem_ade.engine.jobs import failure_record, read_failure, read_summary
 
     failed, summary = read_failure(folder), read_summary(folder)
@@ -223,7 +223,7 @@ def archive_line(folder: Path, key: dict) -> dict:
         record = json.loads(failure_record(folder).read_text()) if failed else {}
         return {"key": key, "rows": [], "seconds": record.get("seconds"),
                 "missing": reason.removeprefix("ModelError: ")}
-    rows = [_plain(r) for r in read_table(folder)]
+    rows = [_plain(r) for r in read_branch_table(folder)]
     return {"key": key, "rows": rows, "missing": None, "seconds": summary.get("seconds")}
 
 

@@ -108,7 +108,7 @@ def plan(eps_list, branches, step: float = STEP, modes: int = MODES,
 
 def rows_of(root: Path, name: str) -> tuple[list[dict], list[dict]]:
     """A finished branch's rows (branch.csv) and bifurcations, or ([], [])."""
-    from fem_ade.campaigns.branch import read_table
+    from fem_ade.campaigns.branch import read_branch_table
     from fem_ade.engine.jobs import read_summary
     from fem_ade.store.status import Status
 
@@ -118,7 +118,7 @@ def rows_of(root: Path, name: str) -> tuple[list[dict], list[dict]]:
         return [], []
     forks = folder / "bifurcations.json"
     found = json.loads(forks.read_text())["bifurcations"] if forks.is_file() else []
-    return read_table(folder), found
+    return read_branch_table(folder), found
 
 
 def stable_stretches(rows: list[dict]) -> list[list[float]]:

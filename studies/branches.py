@@ -69,7 +69,7 @@ def pairs_of(sweep) -> list[dict]:
 
 def line(root: Path, point) -> list[dict]:
     """A branch point's rows (its branch.csv) once it has ended, else none."""
-    from fem_ade.campaigns.branch import read_table
+    from fem_ade.campaigns.branch import read_branch_table
     from fem_ade.engine.jobs import read_summary
     from fem_ade.store.status import Status
 
@@ -77,7 +77,7 @@ def line(root: Path, point) -> list[dict]:
     summary = read_summary(folder)
     if summary is None or summary.get("status") != Status.COMPLETED:
         return []
-    return read_table(folder)
+    return read_branch_table(folder)
 
 
 def main(argv=None) -> dict:

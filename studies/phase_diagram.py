@@ -22,7 +22,7 @@ import math
 from pathlib import Path
 
 from fem_ade.analysis.sharp import BRANCH_OF_LABEL
-from fem_ade.campaigns.sweep import Sweep, load_sweep, read_table, row, run_sweep
+from fem_ade.campaigns.sweep import Sweep, load_sweep, read_sweep_table, row, run_sweep
 from fem_ade.plots.sweep_plot import draw
 from fem_ade.store.status import ENDED, HAS_RESULT, Status
 
@@ -163,7 +163,7 @@ def main(argv=None) -> dict:
         out = root / sweep.name
         if args.report_only:  # from the run folders, or without them from the table
             rows = ([row(p, out) for p in sweep.points()] if (out / "points").is_dir()
-                    else read_table(out / "sweep.csv"))
+                    else read_sweep_table(out / "sweep.csv"))
         else:
             rows = run_sweep(sweep, out, workers=args.workers, quiet=False)
         draw(rows, sweep, out)

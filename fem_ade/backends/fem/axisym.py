@@ -43,8 +43,8 @@ from fem_ade.model.params import ModelError
 from fem_ade.scenes.catalogue import Scene
 
 #: nodes per ε at the finest spacing of the default resolution (n = ⌈L·this/(ε·p)⌉ cells per
-#: L). Measured (studies/axisymmetric_resolution.py, docs/model.md §11): the relative error
-#: of E at steady state is below 1e-4 from 2 nodes per ε at order 4 on every shape tried
+#: L). Measured (studies/axisymmetric.py, its resolution stage; docs/model.md §11): E's
+#: relative error at steady state is below 1e-4 from 2 nodes per ε at order 4 on every shape tried
 NODES_PER_EPS = 2.5
 #: the default element order of the axisymmetric geometry (studies/results/cost.md)
 DEFAULT_ORDER = 8

@@ -3,8 +3,9 @@
 Implicit side (assembled once per run): ``mass`` (φ, v) and ``laplace`` (∇φ, ∇v).
 
 Functionals (model §2) on nodal fields. Integrals of nonlinear expressions are exact integrals
-of their nodal interpolants, ∫ I(F) = Σᵢ wᵢ F(φᵢ) with w = M·1 (the trapezoid rule for
-uniform Q1, Simpson/Gauss–Lobatto for tensor Q2); the gradient integrals are exact,
+of their nodal interpolants by the nodes' rule, ∫ I(F) = Σᵢ wᵢ F(φᵢ) with w = M·1 (the
+Gauss–Lobatto–Legendre weights of the spectral elements: the trapezoid rule at order 1; the
+lumped mass on a mesh file); the gradient integrals are exact,
 ∫|∇φ|² = φᵀKφ and ∫ (1 − φ²)Δφ = (φ²)ᵀKφ; μ = M_L⁻¹Kφ stands for −Δφ.
 
 Gradients ⟨δQ/δφ, v⟩ as functionals with nodal products: each ``*_gradient`` returns
