@@ -98,16 +98,25 @@ class BackendSpec:
         return tuple(o.name for o in self.options)
 
 
+#: the FEM's element order where a run gives none — the one place each geometry's default is
+#: stated: a tensor mesh's is the cost study's best at moderate accuracy
+#: (studies/results/cost.md), the axisymmetric geometry's its resolution study's
+#: (studies/results/axisymmetric.md), a mesh file's the order it can be read at (1 or 2);
+#: ``FEMBackend(scene, n=cells)`` built directly keeps its constructor's 1
+RUN_ORDERS = {"tensor": 4, "axisymmetric": 8, "mesh file": 1}
+
 BACKENDS = {
     "fem": BackendSpec(
         "fem", "fem_ade.backends.fem.backend:FEMBackend",
         "mixed (phi, mu) periodic finite elements on hexahedra (quads in 2D)",
         (
             Option("order", int, 1, None,
-                   "element order p, 1 to 16 (a run's default: 4, the cost study's best at "
-                   "moderate accuracy; 8 axisymmetric; 1 on a mesh file, which takes 1 or 2; "
-                   "FEMBackend's own: 1): Lagrange elements with their nodes at the "
-                   "Gauss-Lobatto-Legendre points, --n/p cells per axis"),
+                   f"element order p, 1 to 16 (a run's default: {RUN_ORDERS['tensor']}, the "
+                   "cost study's best at moderate accuracy; "
+                   f"{RUN_ORDERS['axisymmetric']} axisymmetric; {RUN_ORDERS['mesh file']} on "
+                   "a mesh file, which takes 1 or 2; FEMBackend's own: 1): Lagrange elements "
+                   "with their nodes at the Gauss-Lobatto-Legendre points, --n/p cells per "
+                   "axis"),
             Option("mesh", str, None, None,
                    "a periodic hexahedral mesh file (read with meshio), graded[:g][@c] for a "
                    "tensor mesh graded toward c (grading g in [0, 1)), or uniform (the "

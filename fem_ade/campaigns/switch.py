@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_ade.model.params import ModelError
+from fem_ade.registry import RUN_ORDERS
 
 #: max |δψ| of the start (ψ scaled to max 1): far enough from the saddle that the flow
 #: leaves it in a few hundred steps, near enough that the start is the saddle's
@@ -120,7 +121,7 @@ def default_nodes(eps: float, L: float, order: int) -> int:
 
 
 def switch(branch: str | Path, index: int | None, out: str | Path, *, delta: float = DELTA,
-           n: int | None = None, order: int = 4, backend: str = "fem",
+           n: int | None = None, order: int = RUN_ORDERS["tensor"], backend: str = "fem",
            max_steps: int | None = None, point: int | None = None,
            checkpoint_every: int = 200, mode: int | None = None, quiet: bool = False):
     """The 3D run from bifurcation ``index`` of a branch folder (module docstring), into the
@@ -187,7 +188,8 @@ def _parser() -> argparse.ArgumentParser:
                     help=f"the start's max |delta psi| (default {DELTA})")
     ap.add_argument("--n", type=int, default=None,
                     help=f"nodes per axis (default {NODES_PER_EPS} L/eps, up to the order)")
-    ap.add_argument("--order", type=int, default=4, help="FEM element order (default 4)")
+    ap.add_argument("--order", type=int, default=RUN_ORDERS["tensor"],
+                    help=f"FEM element order (default {RUN_ORDERS['tensor']})")
     ap.add_argument("--backend", choices=("fem", "spectral"), default="fem")
     ap.add_argument("--max-steps", type=int, default=None,
                     help="at most this many steps (default: the steady recipe's)")

@@ -40,14 +40,15 @@ import numpy as np
 from fem_ade.backends.fem.backend import FEMBackend
 from fem_ade.backends.fem.tensor import BoundedAxis, TensorSpace
 from fem_ade.model.params import ModelError
+from fem_ade.registry import RUN_ORDERS
 from fem_ade.scenes.catalogue import Scene
 
 #: nodes per ε at the finest spacing of the default resolution (n = ⌈L·this/(ε·p)⌉ cells per
 #: L). Measured (studies/axisymmetric.py, its resolution stage; docs/model.md §11): E's
 #: relative error at steady state is below 1e-4 from 2 nodes per ε at order 4 on every shape tried
 NODES_PER_EPS = 2.5
-#: the default element order of the axisymmetric geometry (studies/results/cost.md)
-DEFAULT_ORDER = 8
+#: the default element order of the axisymmetric geometry (:data:`fem_ade.registry.RUN_ORDERS`)
+DEFAULT_ORDER = RUN_ORDERS["axisymmetric"]
 #: the graded mesh: the fine zone's margin around the initial membrane (a fraction of L)
 DEFAULT_MARGIN = 0.05
 #: the graded mesh: the ratio of neighbouring cells outside the fine zone, and the largest

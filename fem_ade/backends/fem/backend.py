@@ -21,7 +21,7 @@ from fem_ade.backends.fem.assemble import FILE_MESH_ORDERS, space
 from fem_ade.backends.fem.solve import EXACT, make_solver
 from fem_ade.backends.fem.step import MixedStep
 from fem_ade.model.params import ModelError, is_int
-from fem_ade.registry import FEM_ORDERS, FEM_SOLVERS, LINALGS
+from fem_ade.registry import FEM_ORDERS, FEM_SOLVERS, LINALGS, RUN_ORDERS
 from fem_ade.scenes.catalogue import Scene
 
 
@@ -102,9 +102,9 @@ class FEMBackend(BackendBase):
     #: file (scikit-fem's matrices and AMG: 2.7 kB per unknown measured for Q1)
     bytes_per_dof = 400.0
     bytes_per_krylov_dof = 1500.0
-    #: the element order of a run that gives none: the cost study's best at moderate
-    #: accuracy (studies/results/cost.md; the constructor's own default stays 1)
-    RUN_ORDER = 4
+    #: the element order of a run that gives none (:data:`fem_ade.registry.RUN_ORDERS`;
+    #: the constructor's own default stays 1)
+    RUN_ORDER = RUN_ORDERS["tensor"]
     bytes_per_assembled_dof = 4000.0
 
     @classmethod
@@ -132,7 +132,7 @@ class FEMBackend(BackendBase):
         options = dict(options)
         if "order" not in options:
             tensor = fmesh.parse_option(options.get("mesh"))[0] in ("uniform", "graded")
-            options["order"] = cls.RUN_ORDER if tensor else 1
+            options["order"] = cls.RUN_ORDER if tensor else RUN_ORDERS["mesh file"]
         return options
 
     @classmethod
