@@ -357,7 +357,7 @@ def test_api_arguments(tmp_path):
     out = tmp_path / "R"
     r = simulate("sphere", n=16, steps=2, allow_underresolved=True, render=False)
     assert r.status == "completed"  # a scene by name, as on the command line
-    with pytest.raises(ModelError, match="perturb must be a number"):
+    with pytest.raises(ModelError, match=r"^perturb \(--perturb\) must be a number"):
         simulate("sphere", n=16, steps=2, perturb=None, out=out)
     with pytest.raises(ModelError, match="real field"):
         simulate("sphere", n=16, steps=2, phi0=np.ones((16,) * 3, complex), out=out)
@@ -365,7 +365,7 @@ def test_api_arguments(tmp_path):
         simulate("sphere", n=16, steps=2, monitor=3, out=out)
     with pytest.raises(TypeError, match="scene must be a Scene"):
         simulate(3.5, out=out)
-    with pytest.raises(ModelError, match="steps must be an integer >= 1"):
+    with pytest.raises(ModelError, match=r"^steps \(--steps\) must be an integer >= 1"):
         simulate("sphere", n=16, steps=0, allow_underresolved=True, out=out)
     assert not out.exists()
 

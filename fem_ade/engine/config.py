@@ -111,9 +111,9 @@ class RunConfig:
         if not isinstance(self.backend_options, dict):
             raise ModelError(f"backend_options must be a table, got {self.backend_options!r}")
         if not is_real(self.perturb) or self.perturb < 0:
-            raise ModelError(f"--perturb must be a number >= 0, got {self.perturb!r}")
+            raise ModelError(f"{option('perturb')} must be a number >= 0, got {self.perturb!r}")
         if not is_int(self.seed, 0):
-            raise ModelError(f"--seed must be an integer >= 0, got {self.seed!r}")
+            raise ModelError(f"{option('seed')} must be an integer >= 0, got {self.seed!r}")
         check_loop_options(steps=self.steps, until_steady=self.until_steady,
                            max_steps=self.max_steps, every=self.every,
                            checkpoint_every=self.checkpoint_every,
@@ -129,8 +129,8 @@ class RunConfig:
             except TypeError as err:
                 raise ModelError(f"adaptive: {err}") from None
         if self.accelerate and self.adaptive:
-            raise ModelError("--accelerate and --adaptive do not go together (momentum needs a "
-                             "fixed step map)")
+            raise ModelError(f"{option('accelerate')} and {option('adaptive')} do not go "
+                             "together (momentum needs a fixed step map)")
         for name in ("accelerate", "render", "sharp"):
             if not isinstance(getattr(self, name), bool):
                 raise ModelError(f"{name} must be true or false, got {getattr(self, name)!r}")
@@ -168,12 +168,20 @@ def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_ever
     """The loop's numbers, before anything is written (ModelError, one line)."""
     if (steps is None) == (until_steady is None):
         raise ModelError("give exactly one of steps and until_steady")
-    for name, value, low in (("steps", steps, 1), ("max-steps", max_steps, 1),
-                             ("every", every, 1), ("checkpoint-every", checkpoint_every, 1),
-                             ("save-every", save_every, 1), ("shape-every", shape_every, 1)):
+    for name, value, low in (("steps", steps, 1), ("max_steps", max_steps, 1),
+                             ("every", every, 1), ("checkpoint_every", checkpoint_every, 1),
+                             ("save_every", save_every, 1), ("shape_every", shape_every, 1)):
         if value is None:
             continue
         if not is_int(value, low):
-            raise ModelError(f"--{name} must be an integer >= {low}, got {value!r}")
+            raise ModelError(f"{option(name)} must be an integer >= {low}, got {value!r}")
     if until_steady is not None and not (is_real(until_steady) and until_steady > 0):
-        raise ModelError(f"--until-steady must be a positive number, got {until_steady}")
+        raise ModelError(f"{option('until_steady')} must be a positive number, got "
+                         f"{until_steady}")
+
+
+def option(name: str) -> str:
+    """A run option as an error names it: the Python keyword, and the command line's flag
+    beside it (one message for both front ends: ``simulate(max_steps=0)`` and
+    ``--max-steps 0``)."""
+    return f"{name} (--{name.replace('_', '-')})"

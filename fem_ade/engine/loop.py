@@ -499,10 +499,10 @@ def run_loop(
                           or not math.isfinite(dt) or dt <= 0):
         raise ModelError(f"dt must be a positive number, got {dt!r}")
     if accelerate and adaptive is not None:
-        raise ModelError("--accelerate and --adaptive do not go together (momentum needs a "
-                         "fixed step map)")
+        raise ModelError("accelerate (--accelerate) and adaptive (--adaptive) do not go "
+                         "together (momentum needs a fixed step map)")
     if every < 1:
-        raise ModelError(f"--every must be >= 1, got {every}")
+        raise ModelError(f"every (--every) must be >= 1, got {every}")
     for value in (checkpoint_every, *(k for k, _ in observers)):
         if value is not None and value < 1:
             raise ModelError(f"checkpoint and observer intervals must be >= 1, got {value}")

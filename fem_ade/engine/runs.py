@@ -26,7 +26,7 @@ import numpy as np
 
 from fem_ade.backends.base import Backend, backend_class, make_backend
 from fem_ade.backends.threads import limit_threads
-from fem_ade.engine.config import RunConfig
+from fem_ade.engine.config import RunConfig, option
 from fem_ade.engine.loop import AdaptiveDt, LoopState, RunResult, run_loop
 from fem_ade.model.params import HISTORY_COLUMNS, ModelError, is_real
 from fem_ade.scenes.catalogue import Scene, scene_from_mapping, scene_to_mapping
@@ -162,7 +162,7 @@ def simulate(
                         f"{type(monitor).__name__}")
     if config is None:
         if not is_real(perturb):  # None included: perturb has no "not given"
-            raise ModelError(f"perturb must be a number >= 0, got {perturb!r}")
+            raise ModelError(f"{option('perturb')} must be a number >= 0, got {perturb!r}")
         config = RunConfig.build(
             scene, backend=backend, n=n, dt=dt, steps=steps, until_steady=until_steady,
             max_steps=max_steps, every=every, ic=ic, perturb=perturb, seed=seed, scheme=scheme,
