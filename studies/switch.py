@@ -21,12 +21,20 @@ and the lowest is not stable in 3D. If that is the membrane's, it holds at small
 same point's blocks at ε = 0.0075 and at R₀ = 0.25 (ε/R₀ = 0.046 and 0.04) must be unstable
 in m = 2 too.
 
+**The sweep's starfish, refined.** The 3D ADE sweep (``phase_diagram/ade``, ε = 0.04,
+spectral 32³) ended in steady 4- and 3-armed starfish at (v, Δa₀) = (0.8, 1.64) from the
+oblate's seed and (0.7, 1.64) from the prolate's. Each is made again there, then run at
+ε = 0.02 (FEM 64³, order 4) from its end; hypothesis (issue 44): the starfish stays a steady
+state, and is not the lowest state of its cell. Test: its label and arms at ε = 0.02, Newton
+from it and its 3D eigenvalues (a minimum or a saddle), and its e beside the ends of the
+cell's other seeds (prolate, pear, oblate) on the same mesh.
+
 Writes ``OUT/switch.md`` (with the hand-written ``OUT/switch_notes.md``), ``.json`` and each
 switched run's picture ``OUT/switch-CASE.png``; the branch folders and the 3D run folders in
 ``OUT/switch/`` (not committed). A measurement: 3D
 runs and their stability, timed, one after another in one process.
 
-    python studies/switch.py --out studies/results     # ~20 min
+    python studies/switch.py --out studies/results     # ~40 min on 2 cores
     python studies/switch.py --quick                   # ε = 0.04 on 32³, ~30 s
 """
 
@@ -51,6 +59,9 @@ QUICK_CASES = (("eps=0.04", 0.04, 0.2, 0.9, 0.78, 0.02, 0, 32, 4),)
 #: the stomatocyte control: (ε, R₀) at (v, Δa₀) = (0.6, 0.8), κ̄/κ = 1.4
 STOMATOCYTE = ((0.01, 0.162), (0.0075, 0.162), (0.01, 0.25), (0.005, 0.162))
 KBAR = 1.4
+#: the sweep's starfish: (v, Δa₀, the seed it grew from, the other seeds run beside it)
+STARFISH = ((0.8, 1.64, "oblate", ("prolate", "pear")),
+            (0.7, 1.64, "prolate", ("oblate",)))
 
 
 def _branch(out: Path, args: list[str]) -> Path:
@@ -139,6 +150,53 @@ def stomatocyte_case(root: Path, eps: float, R0: float) -> dict:
             "unstable_3d": int(row["unstable_3d"])}
 
 
+def _run(folder: Path, **kw) -> dict:
+    """A vesicle run by the steady recipe (made once: a finished folder is read back)."""
+    from fem_ade.engine.runs import recipe, simulate
+    from fem_ade.scenes.catalogue import vesicle_scene
+
+    if not (folder / "summary.json").is_file():
+        scene_kw = {k: kw.pop(k) for k in ("v", "da0", "eps", "branch")}
+        scene = vesicle_scene(kbar=KBAR, **scene_kw)
+        simulate(scene, out=folder, **{**recipe("steady", scene), **kw, "quiet": True,
+                                       "force": True})
+    return json.loads((folder / "summary.json").read_text())
+
+
+def starfish_case(root: Path, v: float, da0: float, seed: str, others: tuple) -> dict:
+    """A sweep starfish made again at ε = 0.04, refined to ε = 0.02, its steadiness and 3D
+    eigenvalues, and the cell's other seeds at ε = 0.02 on the same mesh."""
+    from fem_ade.analysis.sharp import reduced_energy
+    from fem_ade.campaigns.stability import cartesian, load_state, polish
+    from fem_ade.model.params import ModelError
+
+    name = f"v={v:g}_da0={da0:g}"
+    coarse = _run(root / f"starfish-{name}-eps=0.04", v=v, da0=da0, eps=0.04, branch=seed,
+                  backend="spectral", n=32, max_steps=3000, render=False)
+    fine_dir = root / f"starfish-{name}-eps=0.02"
+    fine = _run(fine_dir, v=v, da0=da0, eps=0.02, branch=seed, n=64, max_steps=6000,
+                phi0=str(root / f"starfish-{name}-eps=0.04"), checkpoint_every=200)
+    t0 = time.perf_counter()
+    try:
+        be, _ = load_state(fine_dir)
+        steady = polish(be)
+        stab = cartesian(be, 4)
+        verdict = {"newton_iterations": steady["newton_iterations"],
+                   "eigenvalues_3d": list(stab.eigenvalues), "unstable_3d": stab.unstable_3d}
+    except ModelError as err:
+        verdict = {"not_steady": str(err)}
+    ends = {}
+    for other in others:
+        s = _run(root / f"{other}-{name}-eps=0.02", v=v, da0=da0, eps=0.02, branch=other,
+                 n=64, max_steps=6000, checkpoint_every=200)
+        ends[other] = {"label": s["shape"]["label"], "e": reduced_energy(s["final"])}
+    return {"v": v, "da0": da0, "seed": seed,
+            "coarse": {"label": coarse["shape"]["label"], "e": reduced_energy(coarse["final"])},
+            "fine": {"label": fine["shape"]["label"], "arms": fine["shape"]["arms"],
+                     "e": reduced_energy(fine["final"]), "steps": fine["steps"]},
+            **verdict, "others": ends, "stability_s": round(time.perf_counter() - t0, 1)}
+
+
 def report(result: dict, out: Path, suffix: str) -> None:
     lines = ["# Where the instabilities lead in 3D: branch switching", "",
              "Written by `studies/switch.py` (its docstring says what each case runs). "
@@ -169,6 +227,23 @@ def report(result: dict, out: Path, suffix: str) -> None:
             lam = ", ".join(f"{x:.3g}" for x in c["lowest"])
             lines.append(f"{head} {c['label']} | {c['e']:.5f} | {lam} | "
                          f"{c['lowest_m2_scaled']:.1f} | {c['unstable_3d']} |")
+    if result.get("starfish"):
+        lines += ["", "## The sweep's starfish at ε = 0.02", "",
+                  "| (v, Δa₀) | seed | ε = 0.04 (spectral 32³): label, e | ε = 0.02 (FEM 64³, "
+                  "order 4): label, e | Newton, 3D lowest λ | the cell's other seeds at "
+                  "ε = 0.02: label, e |", "|---|---|---|---|---|---|"]
+        for c in result["starfish"]:
+            if "not_steady" in c:
+                verdict = c["not_steady"]
+            else:
+                lam = ", ".join(f"{x:.3g}" for x in c["eigenvalues_3d"])
+                verdict = (f"converged in {c['newton_iterations']}; {lam} "
+                           f"({c['unstable_3d']} unstable)")
+            others = "; ".join(f"{k}: {o['label']}, {o['e']:.4f}"
+                               for k, o in c["others"].items())
+            lines.append(f"| ({c['v']:g}, {c['da0']:g}) | {c['seed']} | "
+                         f"{c['coarse']['label']}, {c['coarse']['e']:.4f} | "
+                         f"{c['fine']['label']}, {c['fine']['e']:.4f} | {verdict} | {others} |")
     notes = out / f"switch{suffix}_notes.md"
     if notes.is_file():
         lines += ["", notes.read_text().rstrip()]
@@ -186,7 +261,8 @@ def main(argv=None) -> dict:
     result = {"switches": [switch_case(root, c)
                            for c in (QUICK_CASES if args.quick else CASES)],
               "stomatocyte": [] if args.quick else [stomatocyte_case(root, e, r)
-                                                   for e, r in STOMATOCYTE]}
+                                                   for e, r in STOMATOCYTE],
+              "starfish": [] if args.quick else [starfish_case(root, *c) for c in STARFISH]}
     (args.out / f"switch{suffix}.json").write_text(json.dumps(result, indent=1,
                                                               allow_nan=False) + "\n")
     report(result, args.out, suffix)
