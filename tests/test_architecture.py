@@ -186,6 +186,34 @@ def test_a_layer_violation_is_caught():
     assert blind == ["fem_ade.analysis.axishape -> fem_ade.backends.fem.tensor"], blind
 
 
+def _private_imports(source: str, module: str) -> list[str]:
+    """``from fem_ade.X import _name`` in ``source`` (of ``module``) where X is another module:
+    a name private to one module used by another."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom) and not node.level \
+                and (node.module or "").startswith("fem_ade") and node.module != module:
+            out += [f"{module} <- {node.module}.{a.name}" for a in node.names
+                    if a.name.startswith("_") and not a.name.startswith("__")]
+    return out
+
+
+def test_no_module_imports_anothers_private_names():
+    """What one module uses of another is public there (the global dot product, a folder's
+    identity difference, the JSON conversion were imported by their private names); and a
+    private import put back is caught."""
+    root = PACKAGE.parent
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        parts = list(path.relative_to(root).with_suffix("").parts)
+        module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        found += _private_imports(path.read_text(), module)
+    assert found == [], found
+    leak = "def f():\n    from fem_ade.backends.fem.solve import _ALLREDUCE\n"
+    assert _private_imports(leak, "fem_ade.backends.fem.newton") == [
+        "fem_ade.backends.fem.newton <- fem_ade.backends.fem.solve._ALLREDUCE"]
+
+
 def test_no_import_circles():
     """No module reaches itself through imports (lazy ones included): each layer stands on
     the ones below it."""

@@ -176,9 +176,9 @@ class Continuation:
         self.be.scene = replace(self.be.scene, params=params)
 
     def inner(self, a, b) -> float:
-        from fem_ade.backends.fem.solve import _dot
+        from fem_ade.backends.fem.solve import global_dot
 
-        return _dot(self.w * a, b) / self.volume
+        return global_dot(self.w * a, b) / self.volume
 
     def residual(self, phi, lam):
         """F = (∇E + Cλ, V − α, A − β, 0) at φ and the current parameter, λ given."""
@@ -287,7 +287,7 @@ class Continuation:
         """Newton on the extended system from the predicted (φ, p); (φ, p, iterations) or
         None if it does not converge in :data:`MAX_NEWTON` iterations."""
         from fem_ade.backends.fem.newton import kkt_solve, linearize
-        from fem_ade.backends.fem.solve import _dot
+        from fem_ade.backends.fem.solve import global_dot
 
         phi_k, p_k = anchor
         t_phi, t_p = tangent
@@ -314,7 +314,7 @@ class Continuation:
             self.set_p(p)
             if not np.all(np.isfinite(phi)) or np.max(np.abs(phi)) > 2.0:
                 return None
-            decrement = abs(_dot(lin.grad, dphi)) / max(abs(lin.E), 1e-300)
+            decrement = abs(global_dot(lin.grad, dphi)) / max(abs(lin.E), 1e-300)
             if decrement < NEWTON_TOL and abs(dp) < 1e-9 * max(abs(p), 1.0):
                 phi = self.sys.restore(phi)
                 return (phi, p, it) if phi is not None else None
@@ -402,10 +402,10 @@ DERIVED = ("integrity", "fold")
 def row_digest(row: dict) -> str:
     """A point's row as a checksum: its values as summary.json stores them, without
     :data:`DERIVED`."""
-    from fem_ade.store.output import _jsonable
+    from fem_ade.store.output import jsonable
 
     plain = {k: v for k, v in row.items() if k not in DERIVED}
-    return _digest(json.dumps(_jsonable(plain), sort_keys=True).encode())
+    return _digest(json.dumps(jsonable(plain), sort_keys=True).encode())
 
 
 def save_point(out: Path, k: int, be, row: dict, branch: str) -> dict:
@@ -413,13 +413,13 @@ def save_point(out: Path, k: int, be, row: dict, branch: str) -> dict:
     ``integrity``: the branch's :func:`identity_digest`, the index, φ's and the row's
     checksums — the summary is written last, so a point cut short has none); the row as
     saved."""
-    from fem_ade.store.output import _jsonable, write_fields, write_json_atomic
+    from fem_ade.store.output import jsonable, write_fields, write_json_atomic
 
     folder = out / "points" / f"{k:04d}"
     folder.mkdir(parents=True, exist_ok=True)
     fields = be.fields()
     write_fields(folder / "final.npz", fields)
-    row = json.loads(json.dumps(_jsonable({k_: v for k_, v in row.items()
+    row = json.loads(json.dumps(jsonable({k_: v for k_, v in row.items()
                                            if k_ not in DERIVED})))
     row["integrity"] = {"branch": branch, "index": k, "phi": field_digest(fields["phi"]),
                         "row": row_digest(row)}
@@ -867,9 +867,9 @@ def _open_folder(out: Path, identity: dict) -> dict:
             raise ModelError(f"{recorded} is not a branch's record ({type(err).__name__}): "
                              "give another --out") from None
         if not _same_identity(stored, identity):
-            from fem_ade.engine.runs import _identity_difference
+            from fem_ade.engine.runs import identity_difference
 
-            why = _identity_difference(stored, identity) if isinstance(stored, dict) else None
+            why = identity_difference(stored, identity) if isinstance(stored, dict) else None
             why = "" if why is None else " (" + why.replace("in the checkpoint", "there").replace(
                 "in run.json", "now") + ")"
             raise ModelError(f"{out} holds another branch{why}: give another --out")

@@ -246,7 +246,7 @@ def load_state(folder: str | Path):
                      "(points/NNNN of a branch folder)")
 
 
-def _read_fields(path: Path) -> dict:
+def read_fields(path: Path) -> dict:
     import zipfile
 
     try:
@@ -270,7 +270,7 @@ def _branch_point(folder: Path, branch: Path):
     except (OSError, ValueError, KeyError, TypeError) as err:
         raise ModelError(f"{folder} is not a readable branch point ({type(err).__name__}: "
                          f"{err})") from None
-    fields = _read_fields(folder / "final.npz")
+    fields = read_fields(folder / "final.npz")
     try:
         return SavedMeshBackend(params, fields, n=n)
     except KeyError as err:
@@ -284,7 +284,7 @@ def _run_folder(folder: Path):
     if config.backend != "fem":
         raise ModelError(f"{folder} is a run of the {config.backend} backend: the stability "
                          "needs the FEM's Hessian (run it with --backend fem)")
-    fields = _read_fields(folder / "final.npz")
+    fields = read_fields(folder / "final.npz")
     if config.backend_options.get("geometry") == "axisymmetric" and "r_vertices" in fields:
         from fem_ade.backends.fem.axisym import SavedMeshBackend
 

@@ -697,9 +697,9 @@ def changed(point: Point, root: Path) -> str | None:
         recorded = json.loads(record.read_text())
     except (OSError, ValueError):
         return "its folder records no parameters (an older fem_ade made it)"
-    from fem_ade.engine.runs import _identity_difference
+    from fem_ade.engine.runs import identity_difference
 
-    difference = _identity_difference(recorded, point.identity())
+    difference = identity_difference(recorded, point.identity())
     return None if difference is None else difference.replace(" in run.json", " now").replace(
         "in the checkpoint", "when it ran")
 

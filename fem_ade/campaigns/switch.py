@@ -93,7 +93,7 @@ def start_fields(point: str | Path, m: int, delta: float = DELTA,
     ``grid``³ nodes (``phi_grid``: what a field file holds for any backend)."""
     from fem_ade.backends.fem.modes import lowest_mode
     from fem_ade.backends.fem.newton import NewtonSystem, linearize
-    from fem_ade.campaigns.stability import _read_fields, load_state
+    from fem_ade.campaigns.stability import load_state, read_fields
     from fem_ade.scenes.initial import meridian_values
 
     if not (math.isfinite(delta) and 0 < delta <= 1):
@@ -101,7 +101,7 @@ def start_fields(point: str | Path, m: int, delta: float = DELTA,
     be, _ = load_state(point)
     sys_ = NewtonSystem(be)
     lam, psi = lowest_mode(sys_, linearize(sys_, be.phi), m)
-    saved = _read_fields(Path(point) / "final.npz")
+    saved = read_fields(Path(point) / "final.npz")
     fields = {"axis": np.asarray(saved["axis"], dtype=float),
               "points": np.asarray(saved["points"], dtype=float),
               "phi": np.asarray(saved["phi"], dtype=float),

@@ -178,7 +178,7 @@ def _holds_another(folder: Path, scene, options, after) -> str:
     compares each point's NAME.point.json (:func:`fem_ade.campaigns.sweep.changed`)."""
     if scene is None or callable(scene) or callable(options):
         return ""
-    from fem_ade.engine.runs import _identity_difference, folder_identity, planned_identity
+    from fem_ade.engine.runs import folder_identity, identity_difference, planned_identity
 
     options = options or {}
     try:
@@ -189,7 +189,7 @@ def _holds_another(folder: Path, scene, options, after) -> str:
     if after is not None or options.get("phi0") is not None:
         for identity in (asked, held):
             identity["scene"].pop("ic", None)
-    difference = _identity_difference(held, asked)
+    difference = identity_difference(held, asked)
     if difference is None:
         return ""
     difference = difference.replace("in the checkpoint", "in the folder").replace(

@@ -363,7 +363,7 @@ def _check_resumable(out: Path, steps: int | None):
     if identity is None or "config" not in identity or digests is None:
         raise ModelError(f"cannot resume {out}: its checkpoint.npz carries no checksums (an "
                          "older fem_ade wrote it): start the run again")
-    difference = _identity_difference(identity, run_identity(scene, config))
+    difference = identity_difference(identity, run_identity(scene, config))
     if difference:
         raise ModelError(f"cannot resume {out}: its checkpoint.npz belongs to another run than "
                          f"run.json's ({difference}); a resume continues that very run")
@@ -415,12 +415,12 @@ def folder_identity(out: str | Path) -> dict:
     return run_identity(*read_run(out))
 
 
-def _identity_difference(stored: dict, current: dict, where: str = "") -> str | None:
+def identity_difference(stored: dict, current: dict, where: str = "") -> str | None:
     """The first field where two identities differ, as 'FIELD: A in the checkpoint, B in
     run.json', or None."""
     if isinstance(stored, dict) and isinstance(current, dict):
         for key in sorted(set(stored) | set(current)):
-            d = _identity_difference(stored.get(key), current.get(key),
+            d = identity_difference(stored.get(key), current.get(key),
                                      f"{where}.{key}" if where else key)
             if d:
                 return d

@@ -218,11 +218,11 @@ class HistoryWriter:
         self._file.close()
 
 
-def _jsonable(obj):
+def jsonable(obj):
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple, set, frozenset)):
-        return [_jsonable(v) for v in obj]
+        return [jsonable(v) for v in obj]
     if isinstance(obj, (np.integer,)):
         return int(obj)
     if isinstance(obj, (np.floating, float)):
@@ -243,7 +243,7 @@ def write_json_atomic(path: str | Path, data: dict, indent: int | None = 2,
         path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + ".tmp")
     separators = (",", ":") if indent is None else None
-    tmp.write_text(json.dumps(_jsonable(data), indent=indent, separators=separators) + "\n")
+    tmp.write_text(json.dumps(jsonable(data), indent=indent, separators=separators) + "\n")
     os.replace(tmp, path)
 
 

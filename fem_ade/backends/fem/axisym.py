@@ -449,12 +449,12 @@ class AxisymmetricFEMBackend(FEMBackend):
         """The (r, z) node grid as quadrilaterals in the plane y = 0 (x = r): ParaView's
         Rotational Extrusion about z revolves it."""
         if self._out is None:
-            from fem_ade.backends.fem.output import _grid_cells
+            from fem_ade.backends.fem.output import grid_cells
 
             ar, az = self.space.axes
             R, Z = np.meshgrid(ar.nodes, az.nodes, indexing="ij")
             points = np.stack([R.ravel(), np.zeros(R.size), Z.ravel()], axis=1)
-            kind, cells = _grid_cells([ar.size, az.size])
+            kind, cells = grid_cells([ar.size, az.size])
             self._out = (points, [(kind, cells)], np.arange(self.space.n_dofs))
         return self._out[0], self._out[1]
 

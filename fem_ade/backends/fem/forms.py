@@ -25,7 +25,7 @@ from __future__ import annotations
 from skfem import BilinearForm
 from skfem.helpers import dot, grad
 
-from fem_ade.backends.fem.solve import _dot
+from fem_ade.backends.fem.solve import global_dot
 from fem_ade.model.params import AREA_FACTOR
 
 
@@ -50,29 +50,29 @@ def laplace(u, v, w):
 def volume(phi, weights, localized=False) -> float:
     """V = ∫ (φ + 1)/2 (the paper's), or ∫ s(φ), s = (2 + 3φ − φ³)/4 (``localized``)."""
     if localized:
-        return 0.25 * _dot(weights, 2.0 + 3.0 * phi - phi * phi * phi)
-    return 0.5 * _dot(weights, phi + 1.0)
+        return 0.25 * global_dot(weights, 2.0 + 3.0 * phi - phi * phi * phi)
+    return 0.5 * global_dot(weights, phi + 1.0)
 
 
 def area(phi, Kphi, weights, eps) -> float:
     """A = (3√2/4) ∫ (ε/2)|∇φ|² + (1/4ε)(φ² − 1)²."""
-    grad2 = _dot(phi, Kphi)
-    bulk = _dot(weights, (phi * phi - 1.0) ** 2)
+    grad2 = global_dot(phi, Kphi)
+    bulk = global_dot(weights, (phi * phi - 1.0) ** 2)
     return AREA_FACTOR * (0.5 * eps * grad2 + bulk / (4.0 * eps))
 
 
 def area_difference(phi, Kphi, weights, D, eps) -> float:
     """ΔA = −(3D/4) ∫ (1 − φ²)Δφ + (1/ε²) φ(1 − φ²)²  (paper 2.6); (1 − φ², Δφ) = (∇φ², ∇φ)."""
     phi2 = phi * phi
-    lap_term = _dot(phi2, Kphi)
-    bulk = _dot(weights, phi * (1.0 - phi2) ** 2) / eps**2
+    lap_term = global_dot(phi2, Kphi)
+    bulk = global_dot(weights, phi * (1.0 - phi2) ** 2) / eps**2
     return -0.75 * D * (lap_term + bulk)
 
 
 def bending(phi, mu, weights, kappa, eps, C) -> float:
     """W = (κ/2ε) ∫ f_c², f_c = −εμ − (1/ε)(φ² − 1)(φ + Cε)  (paper 2.1)."""
     fc = -eps * mu - (phi * phi - 1.0) * (phi + C * eps) / eps
-    return kappa / (2.0 * eps) * _dot(weights, fc * fc)
+    return kappa / (2.0 * eps) * global_dot(weights, fc * fc)
 
 
 # ---------------------------------------------------------------------------------------------

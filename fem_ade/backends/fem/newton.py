@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fem_ade.backends.fem import forms
-from fem_ade.backends.fem.solve import Eigenbasis, StepMatrix, _dot
+from fem_ade.backends.fem.solve import Eigenbasis, StepMatrix, global_dot
 from fem_ade.model.params import ModelError
 
 
@@ -203,7 +203,7 @@ class NewtonSystem:
             if abs(r[0]) <= tol * p.alpha and abs(r[1]) <= tol * p.beta:
                 return u
             gV, gA = self.step.volume_gradient(u), self.step.area_gradient(u, Ku)
-            J = np.array([[_dot(gV, d[0]), _dot(gV, d[1])], [_dot(gA, d[0]), _dot(gA, d[1])]])
+            J = np.array([[global_dot(g, x) for x in d[:2]] for g in (gV, gA)])
             try:
                 ab -= np.linalg.solve(J, r)
             except np.linalg.LinAlgError:
@@ -218,8 +218,8 @@ class NewtonSystem:
     def multipliers(self, g: np.ndarray, C: list[np.ndarray]) -> np.ndarray:
         """The λ that minimise ‖∇E + Cλ‖ in the P⁻¹ norm."""
         PC = [self.P_inverse(c) for c in C]
-        G = np.array([[_dot(ci, pj) for pj in PC] for ci in C])
-        return np.linalg.solve(G, [-_dot(g, pj) for pj in PC])
+        G = np.array([[global_dot(ci, pj) for pj in PC] for ci in C])
+        return np.linalg.solve(G, [-global_dot(g, pj) for pj in PC])
 
 
 @dataclass
@@ -266,7 +266,7 @@ def kkt_solve(sys_: NewtonSystem, lin: Linearization, rhs: np.ndarray,
     step, C = sys_.step, lin.C
     N = lin.phi.size
     PC = [sys_.P_inverse(c) for c in C]
-    S_inv = np.linalg.inv(np.array([[_dot(ci, pj) for pj in PC] for ci in C]))
+    S_inv = np.linalg.inv(np.array([[global_dot(ci, pj) for pj in PC] for ci in C]))
 
     def kkt(x):
         v, nu = x[:N], x[N:]
@@ -274,7 +274,7 @@ def kkt_solve(sys_: NewtonSystem, lin: Linearization, rhs: np.ndarray,
                + step.constraint_hessian_vector(lin.phi, lin.Kphi, v, lin.lam[0], lin.lam[1]))
         for nj, cj in zip(nu, C, strict=True):
             top = top + nj * cj
-        return np.concatenate([top, [_dot(c, v) for c in C]])
+        return np.concatenate([top, [global_dot(c, v) for c in C]])
 
     def prec(x):
         return np.concatenate([sys_.P_inverse(x[:N]), S_inv @ x[N:]])
@@ -360,9 +360,9 @@ def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
         x, its = kkt_solve(sys_, lin, -np.concatenate([lin.grad, lin.violation]), inner_tol)
         gL, viol, lam = lin.grad, lin.violation, lin.lam
         dphi = x[:N]
-        if _dot(gL, dphi) > 0.0:  # negative curvature along the step: downhill instead
+        if global_dot(gL, dphi) > 0.0:  # negative curvature along the step: downhill instead
             dphi = -dphi
-        decrement = abs(_dot(gL, dphi)) / max(abs(E), 1e-300)
+        decrement = abs(global_dot(gL, dphi)) / max(abs(E), 1e-300)
         result.krylov.append(its)
         result.decrement.append(decrement)
         result.violation.append(float(np.max(np.abs(viol[:2]) / np.array(

@@ -11,7 +11,7 @@ import numpy as np
 from fem_ade.backends.fem.mesh import PeriodicMesh
 
 
-def _grid_cells(shape):
+def grid_cells(shape):
     """Cells (VTK order) of a structured grid of points of ``shape`` (C order)."""
     m = np.asarray(shape)
     idx = np.arange(int(np.prod(m))).reshape(tuple(m))
@@ -36,7 +36,7 @@ def closed_mesh(mesh: PeriodicMesh, space):
         sizes = [len(x) for x in locs]
         I = np.meshgrid(*idx1, indexing="ij")
         index = np.ravel_multi_index(tuple(I), sizes).ravel()
-        kind, cells = _grid_cells([len(c) for c in closed])
+        kind, cells = grid_cells([len(c) for c in closed])
     else:
         from skfem.io.meshio import to_meshio
 

@@ -82,17 +82,18 @@ INNER_ITERATIONS = 3
 _ALLREDUCE = None
 
 
-def _dot(a, b) -> float:
+def global_dot(a, b) -> float:
     """a·b without BLAS: ``np.dot`` of long vectors goes to a threaded BLAS, whose threads
     wait for a time slice on a loaded machine (measured on 2 busy cores: 7 ms per dot of 32³
     values, ten times the step's cost); einsum's own loop takes 20 µs, always. Distributed
-    DOFs: this rank's part, summed over the ranks."""
+    DOFs: this rank's part, summed over the ranks. Every inner product of the FEM backend's
+    forms, step, Newton and continuation goes through it."""
     value = float(np.einsum("i,i->", a, b))
     return value if _ALLREDUCE is None else _ALLREDUCE(value)
 
 
 def norm(x) -> float:
-    return math.sqrt(_dot(x, x))
+    return math.sqrt(global_dot(x, x))
 
 
 @dataclass(frozen=True)
@@ -139,11 +140,11 @@ def pcg(A, b, x0, M, atol, maxiter=500):
         return x, 0
     z = M(r)
     p = z.copy()
-    rz = _dot(r, z)
+    rz = global_dot(r, z)
     its = 0
     while its < maxiter:
         q = A(p)
-        pq = _dot(p, q)
+        pq = global_dot(p, q)
         if not (pq > 0.0 and math.isfinite(pq)):
             break
         alpha = rz / pq
@@ -154,8 +155,8 @@ def pcg(A, b, x0, M, atol, maxiter=500):
             break
         z_old = z
         z = M(r)
-        rz_new = _dot(r, z)
-        beta = (rz_new - _dot(r, z_old)) / rz
+        rz_new = global_dot(r, z)
+        beta = (rz_new - global_dot(r, z_old)) / rz
         p *= beta
         p += z
         rz = rz_new
@@ -232,11 +233,11 @@ def woodbury(solve_stack, rhs: list, low_rank) -> list:
     bs = [b for _, b in low_rank]
     out = solve_stack(list(rhs) + bs)
     ys, zs = out[: len(rhs)], out[len(rhs):]
-    G = np.array([[_dot(b, z) for z in zs] for b in bs])
+    G = np.array([[global_dot(b, z) for z in zs] for b in bs])
     G += np.diag([1.0 / sig for sig, _ in low_rank])
     result = []
     for y in ys:
-        coef = np.linalg.solve(G, [_dot(b, y) for b in bs])
+        coef = np.linalg.solve(G, [global_dot(b, y) for b in bs])
         for ci, zi in zip(coef, zs, strict=True):
             y = y - ci * zi
         result.append(y)
@@ -412,7 +413,7 @@ class KrylovSolver:
         S = self.S
         y = (S.a * self.m) * x + self.K @ (S.c * x + S.ke * (self.minv * (self.K @ x)))
         for sig, b in low_rank:
-            y += (sig * _dot(b, x)) * b
+            y += (sig * global_dot(b, x)) * b
         return y
 
     def precondition(self, r):

@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from fem_ade.backends.fem import forms
-from fem_ade.backends.fem.solve import EXACT, Eigenbasis, StepMatrix, _dot, make_solver, norm
+from fem_ade.backends.fem.solve import EXACT, Eigenbasis, StepMatrix, global_dot, make_solver, norm
 from fem_ade.model.constraints import solve_multipliers
 from fem_ade.model.params import (
     ModelError,
@@ -149,7 +149,7 @@ class MixedStep:
         Hv = self.K @ (a - (2.0 * p.kappa / p.eps) * v + (p.kappa * p.eps) * mu_v) \
             + self.w * c
         for sigma, b in self.rank_one(phi, mu, Kphi, *values):
-            Hv = Hv + sigma * _dot(b, v) * b  # the functionals' slopes
+            Hv = Hv + sigma * global_dot(b, v) * b  # the functionals' slopes
         return Hv
 
     def hessian_parts(self, phi, mu, v, mu_v, values):
@@ -288,7 +288,7 @@ class MixedStep:
         """φⁿ⁺¹ = base + a z_V + b z_A with V, A at this step's targets (α, β once the ramp is
         done): (φⁿ⁺¹, λ_V, λ_A)."""
         Kb, Kz = self.K @ base, [self.K @ z for z in zs]
-        JV = [_dot(bs[0], z) for z in zs]
+        JV = [global_dot(bs[0], z) for z in zs]
         a, b = self._multipliers(base, Kb, zs, Kz, JV)
         return base + a * zs[0] + b * zs[1], -a, -b
 
@@ -302,8 +302,8 @@ class MixedStep:
             u = base + a * zs[0] + b * zs[1]
             Ku = Kbase + a * Kz[0] + b * Kz[1]
             gA = self.area_gradient(u, Ku)
-            gV = [_dot(self.volume_gradient(u), z) for z in zs] if p.localized_volume else JV
-            J = np.array([gV, [_dot(gA, z) for z in zs]])
+            gV = [global_dot(self.volume_gradient(u), z) for z in zs] if p.localized_volume else JV
+            J = np.array([gV, [global_dot(gA, z) for z in zs]])
             return forms.volume(u, w, p.localized_volume), forms.area(u, Ku, w, p.eps), J
 
         a, b, _ = self.ramp.solve(lambda targets: solve_multipliers(measure, *targets))
