@@ -39,6 +39,9 @@ def test_a_branch_of_steady_states(branch):
     assert all(a < b for a, b in zip(e, e[1:], strict=False))
     assert all(r["unstable"] == "0" and float(r["lowest_eigenvalue"]) > 0 for r in table)
     assert (branch / "branch.png").is_file() and (branch / "shapes.png").is_file()
+    ended = json.loads((branch / "ended.json").read_text())
+    assert ended == {"why": "reached v = 0.91", "points": len(table), "param": "v",
+                     "last": pytest.approx(v[-1], rel=1e-9)}  # (the table: 10 digits)
 
 
 def test_each_point_is_a_steady_state(branch):
@@ -102,6 +105,8 @@ def test_a_branch_goes_further_with_another_end(branch, tmp_path):
     whole, further = rows(branch), rows(out)
     assert [r["E"] for r in further[:len(whole)]] == [r["E"] for r in whole]
     assert float(further[-1]["v"]) <= 0.85 < float(whole[-1]["v"])
+    ended = json.loads((out / "ended.json").read_text())  # the new end's, not the old's
+    assert ended["why"] == "reached v = 0.85" and ended["points"] == len(further)
     for change in (["--to", "0.97"], ["--step", "0.01"]):
         args = list(ARGS)
         args[args.index(change[0]) + 1] = change[1]

@@ -758,10 +758,22 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
             ds = row["ds_next"]
         if why:
             say(why)
+        why = why or f"max_points = {max_points} reached"
         rows = _finish(out, param, rows, meridians, with_modes=bool(modes and stable))
+        _write_ended(out, param, rows, why)
     finally:
         lock.release()
     return rows
+
+
+def _write_ended(out: Path, param: str, rows: list[dict], why: str) -> None:
+    """``ended.json``: why the branch ended where it did (what the command printed last), its
+    points and its last parameter, rewritten by each run that ends (a resume that goes on
+    past an end says the new one)."""
+    from fem_ade.store.output import write_json_atomic
+
+    write_json_atomic(out / "ended.json", {"why": why, "points": len(rows),
+                                           "param": param, "last": rows[-1][param]})
 
 
 def _finish(out: Path, param: str, rows: list[dict], meridians: list,
