@@ -81,17 +81,23 @@ def test_readme_and_ci_run_the_same_tests():
     assert "fem_ade.run torus" in commands[0]
 
 
-def _module_graph() -> dict[str, set[str]]:
-    """Every module of fem_ade, spectral_ref and sharp_ref → the modules of the three it
-    imports, at the top or inside a function (a lazy import is still a dependency)."""
+def _module_files(packages=("fem_ade", "spectral_ref", "sharp_ref")) -> dict[str, Path]:
+    """Each module's dotted name → its file, in ``packages`` (a package is its __init__)."""
     root = PACKAGE.parent
     files = {}
-    for pkg in ("fem_ade", "spectral_ref", "sharp_ref"):
-        for path in (root / pkg).rglob("*.py"):
+    for pkg in packages:
+        for path in sorted((root / pkg).rglob("*.py")):
             parts = list(path.relative_to(root).with_suffix("").parts)
             if parts[-1] == "__init__":
                 parts = parts[:-1]
             files[".".join(parts)] = path
+    return files
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """Every module of fem_ade, spectral_ref and sharp_ref → the modules of the three it
+    imports, at the top or inside a function (a lazy import is still a dependency)."""
+    files = _module_files()
     graph = {}
     for name, path in files.items():
         is_pkg = path.name == "__init__.py"
@@ -202,12 +208,8 @@ def test_no_module_imports_anothers_private_names():
     """What one module uses of another is public there (the global dot product, a folder's
     identity difference, the JSON conversion were imported by their private names); and a
     private import put back is caught."""
-    root = PACKAGE.parent
-    found = []
-    for path in sorted(PACKAGE.rglob("*.py")):
-        parts = list(path.relative_to(root).with_suffix("").parts)
-        module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-        found += _private_imports(path.read_text(), module)
+    found = [leak for module, path in _module_files(("fem_ade",)).items()
+             for leak in _private_imports(path.read_text(), module)]
     assert found == [], found
     leak = "def f():\n    from fem_ade.backends.fem.solve import _ALLREDUCE\n"
     assert _private_imports(leak, "fem_ade.backends.fem.newton") == [

@@ -420,7 +420,7 @@ def save_point(out: Path, k: int, be, row: dict, branch: str) -> dict:
     fields = be.fields()
     write_fields(folder / "final.npz", fields)
     row = json.loads(json.dumps(jsonable({k_: v for k_, v in row.items()
-                                           if k_ not in DERIVED})))
+                                          if k_ not in DERIVED})))
     row["integrity"] = {"branch": branch, "index": k, "phi": field_digest(fields["phi"]),
                         "row": row_digest(row)}
     write_json_atomic(folder / "summary.json", row)

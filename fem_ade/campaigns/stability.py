@@ -247,6 +247,8 @@ def load_state(folder: str | Path):
 
 
 def read_fields(path: Path) -> dict:
+    """The arrays of a saved field file (final.npz) as a dict; ModelError (one line) for a
+    file that is not readable."""
     import zipfile
 
     try:

@@ -421,7 +421,7 @@ def identity_difference(stored: dict, current: dict, where: str = "") -> str | N
     if isinstance(stored, dict) and isinstance(current, dict):
         for key in sorted(set(stored) | set(current)):
             d = identity_difference(stored.get(key), current.get(key),
-                                     f"{where}.{key}" if where else key)
+                                    f"{where}.{key}" if where else key)
             if d:
                 return d
         return None
