@@ -102,7 +102,7 @@ class BackendSpec:
 #: stated: a tensor mesh's is the cost study's best at moderate accuracy
 #: (studies/results/cost.md), the axisymmetric geometry's its resolution study's
 #: (studies/results/axisymmetric.md), a mesh file's the order it can be read at (1 or 2);
-#: ``FEMBackend(scene, n=cells)`` built directly keeps its constructor's 1
+#: ``FEMBackend(scene, n=...)`` built directly keeps its constructor's 1
 RUN_ORDERS = {"tensor": 4, "axisymmetric": 8, "mesh file": 1}
 
 BACKENDS = {

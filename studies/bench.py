@@ -121,7 +121,7 @@ def peak_rss_mb(nodes: int, order: int, solver: str) -> float:
         "from fem_ade.backends.base import make_backend\n"
         "from fem_ade.scenes.catalogue import get_scene\n"
         f"s = get_scene({SCENE!r})\n"
-        f"be = make_backend('fem', s, n={nodes // order}, dt=s.dt, solver={solver!r}, "
+        f"be = make_backend('fem', s, n={nodes}, dt=s.dt, solver={solver!r}, "
         f"order={order})\n"
         "be.step(); be.step()\n"
         "hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM')][0]\n"
@@ -186,7 +186,7 @@ def fem_steps(F: Figures, scene, nodes: int, orders, repeats: int, quick: bool,
         for mesh in ("uniform", "graded"):
             for scheme in ("paper", "stabilized"):
                 options = {"order": p, **({"mesh": "graded"} if mesh == "graded" else {})}
-                be, setup, setup_cpu = build("fem", scene, nodes // p, scheme, **options)
+                be, setup, setup_cpu = build("fem", scene, nodes, scheme, **options)
                 t = time_steps(be, repeats)
                 solver = be.info()["solver"]
                 tag = f"FEM p={p} {mesh} {solver} {scheme}"
@@ -196,7 +196,7 @@ def fem_steps(F: Figures, scene, nodes: int, orders, repeats: int, quick: bool,
                     F.add(f"FEM p={p} {mesh} {solver} set-up wall", setup, "s",
                           2.0 if not quick else None)
         # the same work on both meshes: their ratio from interleaved steps (drift cancels)
-        pair = [build("fem", scene, nodes // p, "paper", order=p, **mesh_option)[0]
+        pair = [build("fem", scene, nodes, "paper", order=p, **mesh_option)[0]
                 for mesh_option in ({}, {"mesh": "graded"})]
         uniform, graded = time_interleaved(pair, 2 * repeats)
         F.add(f"FEM p={p} graded / uniform step (paper, interleaved)",
@@ -207,8 +207,7 @@ def exact_constraint_steps(F: Figures, scene, nodes: int, repeats: int, quick: b
     """End of section 2: the steady recipe's step (exact constraints), spectral and FEM p=4."""
     print("\n   the steady recipe's step (stabilized + exact constraints: four right sides)")
     for backend, options in (("spectral", {}), ("fem", {"order": 4})):
-        n = nodes // options.get("order", 1)
-        be, _, _ = build(backend, scene, n, "stabilized", constraints="exact", **options)
+        be, _, _ = build(backend, scene, nodes, "stabilized", constraints="exact", **options)
         t = time_steps(be, repeats)
         name = backend + (" p=4 fdm" if options else "")
         F.add(f"{name} exact-constraint step {nodes}^3 cpu", 1e3 * t["cpu"], "ms")
@@ -226,7 +225,7 @@ def amg_steps(F: Figures, scene, nodes: int, repeats: int, quick: bool,
     amg_orders = (1, 4) if quick else (1, 2, 4, 8)
     for p in amg_orders:
         for scheme in ("paper", "stabilized"):
-            be, setup, _ = build("fem", scene, nodes // p, scheme, order=p, solver="amg")
+            be, setup, _ = build("fem", scene, nodes, scheme, order=p, solver="amg")
             t = time_steps(be, repeats)
             tag = f"FEM p={p} amg {scheme}"
             F.add(f"{tag} step / spectral", t["cpu"] / spectral[scheme]["cpu"], "x")
@@ -241,9 +240,8 @@ def ade_share(F: Figures, scene, nodes: int, repeats: int) -> None:
     print("\n4. effects: ADE off")
     no_ade = scene.with_(effects=scene.params.effects - {"ade"})
     for backend, options in (("spectral", {}), ("fem", {"order": 4})):
-        n = nodes // options.get("order", 1)
-        on, _, _ = build(backend, scene, n, "paper", **options)
-        off, _, _ = build(backend, no_ade, n, "paper", **options)
+        on, _, _ = build(backend, scene, nodes, "paper", **options)
+        off, _, _ = build(backend, no_ade, nodes, "paper", **options)
         t_on, t_off = time_steps(on, repeats)["cpu"], time_steps(off, repeats)["cpu"]
         name = backend + (" p=4" if options else "")
         # no target: the ADE terms are pointwise products, whose share of the step falls as

@@ -452,7 +452,7 @@ def test_the_predictor_is_the_quadratic_through_the_last_three_points():
     from fem_ade.campaigns.branch import Continuation
 
     scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05, R0=0.2)
-    be = make_backend("fem", scene, n=12, geometry="axisymmetric", scheme="stabilized",
+    be = make_backend("fem", scene, n=96, geometry="axisymmetric", scheme="stabilized",
                       constraints="exact")
     cont = Continuation(be, "v")
     rng = np.random.default_rng(3)

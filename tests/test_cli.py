@@ -107,7 +107,7 @@ BAD = [
     (["discocyte", "--dt=-1e-7"], "time step must be positive"),
     (["discocyte", "--dt", "1e-4"], "eps^3/kappa"),
     (["discocyte", "--n", "4"], "the FEM of order 4 needs at least 12 nodes per axis"),
-    (["discocyte", "--n", "18"], "--n 18 nodes per axis is not a multiple of the order 4"),
+    (["discocyte", "--n", "18"], "n (--n) = 18 nodes per axis is not a multiple of the order 4"),
     (["discocyte", "--backend", "spectral", "--n", "4"], "n must be"),
     (["two-spheres", "--n", "32"], "grid too coarse"),
     (["discocyte", "--steps", "ten"], "invalid int"),

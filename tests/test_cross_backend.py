@@ -45,7 +45,7 @@ def disc_3d_with_C():
 #: name: (scene, n of the reference, options and n of the FEM-like backends, tolerance)
 DISCRETIZATIONS = {
     "2d-Q1": (ellipse_2d_with_C, 96, {"order": 1}, 96, 0.1),
-    "2d-Q2": (ellipse_2d_with_C, 96, {"order": 2}, 48, 5e-3),
+    "2d-Q2": (ellipse_2d_with_C, 96, {"order": 2}, 96, 5e-3),
     "3d-Q1": (disc_3d_with_C, 24, {"order": 1}, 24, 0.25),
 }
 OTHERS = [name for name in BACKENDS if name != REFERENCE]

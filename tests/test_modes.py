@@ -38,9 +38,9 @@ def prolate(tmp_path_factory):
 
 def _backend(eps=0.05, v=0.9, branch="prolate", R0=0.2, **ade):
     scene = vesicle_scene(v=v, branch=branch, eps=eps, R0=R0, **ade)
-    from fem_ade.backends.fem.axisym import default_cells
+    from fem_ade.backends.fem.axisym import default_nodes
 
-    return make_backend("fem", scene, n=default_cells(eps, 1.0, 8), geometry="axisymmetric",
+    return make_backend("fem", scene, n=default_nodes(eps, 1.0, 8), geometry="axisymmetric",
                         scheme="stabilized", constraints="exact", dt=scene.dt)
 
 
@@ -185,7 +185,7 @@ def _oblate(tmp_path, modes: int):
 def _revolve(ax, scene):
     """An axisymmetric state revolved into 3D (order 8, 64³ nodes: the same spacing as the
     axisymmetric mesh's fine zone at ε = 0.04) and made steady there by Newton."""
-    be = make_backend("fem", scene, n=8, order=8, scheme="stabilized", constraints="exact",
+    be = make_backend("fem", scene, n=64, order=8, scheme="stabilized", constraints="exact",
                       dt=1e-6)
     be.stepper.params = be.params = ax.params
     X, Y, Z = be.space.doflocs

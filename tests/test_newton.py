@@ -14,8 +14,8 @@ from fem_ade.scenes.catalogue import get_scene, vesicle_scene
 CASES = {
     "axisymmetric, ADE, exact": (lambda: vesicle_scene(v=0.85, branch="prolate", eps=0.04,
                                                        kbar=1.4, da0=1.3),
-                                 {"geometry": "axisymmetric", "n": 12}, "exact"),
-    "3D p = 2, paper scene, penalties": (lambda: get_scene("torus"), {"order": 2, "n": 8},
+                                 {"geometry": "axisymmetric", "n": 96}, "exact"),
+    "3D p = 2, paper scene, penalties": (lambda: get_scene("torus"), {"order": 2, "n": 16},
                                          "penalty"),
     "3D p = 1, spontaneous curvature": (lambda: get_scene("discocyte").with_(
         C=1.5, effects=frozenset({"bending", "ade", "volume", "area",
@@ -56,7 +56,7 @@ def test_newton_converges_quadratically_to_the_flows_steady_state():
     kw = recipe("steady", scene)
 
     def flow(tol):
-        be = make_backend("fem", scene, n=10, geometry="axisymmetric", scheme="stabilized",
+        be = make_backend("fem", scene, n=80, geometry="axisymmetric", scheme="stabilized",
                           constraints="exact")
         res = run_loop(be, dt=kw["dt"], until_steady=tol, max_steps=20000, every=10,
                        accelerate=True)
@@ -81,7 +81,7 @@ def test_bordered_solve_meets_its_tolerance_with_the_right_side_in_the_constrain
     from fem_ade.backends.fem.newton import NewtonSystem, kkt_solve, linearize
 
     scene = vesicle_scene(v=0.9, branch="prolate", eps=0.02)
-    be = make_backend("fem", scene, n=16, geometry="axisymmetric", scheme="stabilized",
+    be = make_backend("fem", scene, n=128, geometry="axisymmetric", scheme="stabilized",
                       constraints="exact")
     run_loop(be, dt=recipe("steady", scene)["dt"], steps=50, every=10)
     sys_ = NewtonSystem(be, "minres")  # (the direct solve of 2D spaces: test_modes.py)
@@ -112,7 +112,7 @@ def test_a_step_that_climbs_is_taken_downhill(monkeypatch):
     import fem_ade.backends.fem.newton as newton
 
     scene = vesicle_scene(v=0.8, branch="oblate", eps=0.04)
-    be = make_backend("fem", scene, n=10, geometry="axisymmetric", scheme="stabilized",
+    be = make_backend("fem", scene, n=80, geometry="axisymmetric", scheme="stabilized",
                       constraints="exact")
     run_loop(be, dt=recipe("steady", scene)["dt"], until_steady=1e-4, max_steps=20000,
              every=10, accelerate=True)

@@ -99,7 +99,7 @@ def test_second_run_on_the_same_folder_is_refused(tmp_path):
     assert first.returncode == 0, err
     summary = json.loads((out / "summary.json").read_text())
     run = json.loads((out / "run.json").read_text())
-    assert summary["n"] == run["n"] == 6 and summary["steps"] == 600  # cells: 24 nodes, p = 4
+    assert summary["n"] == run["n"] == 24 and summary["steps"] == 600  # nodes per axis
     h = read_history(out / "history.csv")
     assert np.array_equal(h["step"], np.arange(0, 601, 10))
     assert not (out / OWNER_NAME).exists()  # released at the end
@@ -395,8 +395,8 @@ def test_one_run_configuration(tmp_path, cli):
         RunConfig.from_mapping({k: v for k, v in cli_json.items() if k != "scene"})
     with pytest.raises(ModelError, match="--dt must be a positive number"):
         RunConfig.build(SCENES["sphere"], dt=-1.0, adaptive=True)
-    # the scene as run: a seeded FEM run of order 2 on 16 nodes (8 cells) records the torus
-    # it started from and its 16 points per axis, whose default n is the run's again
+    # the scene as run: a seeded FEM run of order 2 on 16 nodes records the torus it started
+    # from and its 16 points per axis, whose default n is the run's again
     from fem_ade.scenes.catalogue import scene_from_mapping
 
     simulate("torus", backend="fem", n=16, steps=1, ic="seeded", allow_underresolved=True,
@@ -404,7 +404,7 @@ def test_one_run_configuration(tmp_path, cli):
     run = json.loads((tmp_path / "seeded" / "run.json").read_text())
     assert run["scene"]["ic"]["kind"] == "torus" and run["scene"]["n"] == 16
     recorded = scene_from_mapping(run["scene"])
-    assert RunConfig.build(recorded, backend="fem", backend_options={"order": 2}).n == 8
+    assert RunConfig.build(recorded, backend="fem", backend_options={"order": 2}).n == 16
 
 
 # --- the randomized fault test ----------------------------------------------------------------

@@ -205,14 +205,14 @@ def test_one_classifier_for_both_geometries(label):
     decision tree (fem_ade.analysis.shape.classify) — issue 41: the two geometries had two
     trees that had drifted apart."""
     from fem_ade.backends.base import make_backend
-    from fem_ade.backends.fem.axisym import default_cells
+    from fem_ade.backends.fem.axisym import default_nodes
     from fem_ade.model.params import Params
     from fem_ade.scenes.catalogue import Scene
 
     ic = _shapes()[label]
     params = Params(eps=0.02, alpha=0.05, beta=0.8)
     scene = Scene(label, params, 1e-7, ic, n=48)
-    be = make_backend("fem", scene, n=default_cells(0.02, 1.0, 8), order=8,
+    be = make_backend("fem", scene, n=default_nodes(0.02, 1.0, 8), order=8,
                       geometry="axisymmetric")
     shape, _ = be.describe_final(be.diagnostics())
     assert _classified(ic)["label"] == label

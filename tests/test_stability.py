@@ -156,8 +156,7 @@ def test_fem_variants_run_with_decaying_energy(options):
     from fem_ade.backends.base import make_backend
 
     scene = get_scene("discocyte")
-    n = 24 // options.get("order", 1)
-    be = make_backend("fem", scene, n=n, dt=scene.dt, **options)
+    be = make_backend("fem", scene, n=24, dt=scene.dt, **options)
     steps = 15 if options.get("solver") == "amg" else 40  # PCG with AMG: 20× the step's cost
     res = run_loop(be, dt=scene.dt, steps=steps, every=5)
     assert res.status == "completed", res.message

@@ -147,9 +147,8 @@ class BackendBase:
             raise ModelError(f"the {cls.name} backend takes no option(s) {sorted(unknown)}")
         params = scene.params.for_constraints(constraints).validate()
         scene.validate()
-        least = cls.min_cells(**options)
-        if not isinstance(n, int) or isinstance(n, bool) or n < least:
-            raise ModelError(f"n must be an integer >= {least}, got {n!r}")
+        cls.check_n(n, **options)
+        least = cls.min_n(**options)
         spacing = cls.check_options(scene, n, **options)
         check_resolution(params, n, dt, allow_underresolved=allow_underresolved,
                          check_dt=scheme == "paper", spacing=spacing, min_n=least)
@@ -168,13 +167,13 @@ class BackendBase:
 
     @classmethod
     def default_n(cls, scene: Scene, **options) -> int:
-        """The n of a run that gives none: the scene's grid."""
+        """The n of a run that gives none, in nodes per axis: the scene's grid."""
         return scene.n
 
     @classmethod
     def nodes_per_axis(cls, n: int, **options) -> int | None:
-        """The grid points per axis of a run with this n (None: not a tensor grid); the
-        inverse of :meth:`default_n`, so that a run's scene records its grid."""
+        """The cubic grid a run's scene records (its ``n``): ``n`` itself, or None where the
+        run has no cubic grid (a mesh file, the (r, z) half-plane)."""
         return n
 
     @classmethod
@@ -184,17 +183,17 @@ class BackendBase:
         return dict(options)
 
     @classmethod
-    def cells(cls, nodes, **options):
-        """A run's ``n`` as this backend counts it, from the nodes per axis the user gives
-        (``--n``, ``simulate(n=...)``): the grid itself here; ModelError (one line) for a
-        count the backend cannot have. A value that is no count at all is returned as it
-        is, for :meth:`check` to refuse."""
-        return nodes
+    def min_n(cls, **options) -> int:
+        """The smallest n (nodes per axis) a run takes: a grid of 8 points per axis."""
+        return 8
 
     @classmethod
-    def min_cells(cls, **options) -> int:
-        """The smallest n a run takes (a grid of 8 points per axis)."""
-        return 8
+    def check_n(cls, n, **options) -> None:
+        """A run's ``n`` — nodes per axis, at every layer (``--n``, ``simulate(n=...)``,
+        the constructor, run.json) — for this backend and options; ModelError (one line)."""
+        least = cls.min_n(**options)
+        if not isinstance(n, int) or isinstance(n, bool) or n < least:
+            raise ModelError(f"n must be an integer >= {least}, got {n!r}")
 
     @classmethod
     def check_options(cls, scene: Scene, n: int, **options) -> float:

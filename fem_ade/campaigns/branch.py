@@ -850,25 +850,13 @@ def _check_out(out) -> Path:
     return out
 
 
-def _same_identity(stored: dict, identity: dict) -> bool:
-    """Whether a branch.json is this branch's: equal, where a folder made before a backend
-    option's default was written out (``order``) counts as having that default."""
-    if stored == identity:
-        return True
-    if not isinstance(stored, dict) or not isinstance(stored.get("options"), dict):
-        return False
-    from fem_ade.backends.fem.axisym import DEFAULT_ORDER
-
-    filled = {**stored, "options": {"order": DEFAULT_ORDER, **stored["options"]}}
-    return filled == identity
-
-
 def _open_folder(out: Path, identity: dict) -> dict:
     """The branch folder ``out`` (locked) made this branch's: a new or empty one gets its
     branch.json, one with this branch's is gone on with; ModelError (one line) for a folder
     of another branch, one whose branch.json is not a branch's, or one that holds files but
     no branch.json (a run folder; a branch whose record was removed, whose points could be
     of any model). Returns the identity as branch.json holds it."""
+    from fem_ade.campaigns.identity import same_identity
     from fem_ade.store.output import contents, write_json_atomic
 
     recorded = out / "branch.json"
@@ -878,7 +866,7 @@ def _open_folder(out: Path, identity: dict) -> dict:
         except (OSError, ValueError) as err:
             raise ModelError(f"{recorded} is not a branch's record ({type(err).__name__}): "
                              "give another --out") from None
-        if not _same_identity(stored, identity):
+        if not same_identity(stored, identity):
             from fem_ade.engine.runs import identity_difference
 
             why = identity_difference(stored, identity) if isinstance(stored, dict) else None
@@ -899,7 +887,7 @@ def _branch_setup(scene, param: str, start: float, stop: float, step: float, n, 
     exact constraints, the axisymmetric FEM) and the branch's identity: what its points are
     (not where they stop: a branch run again with another --to on the same side goes on
     from its points, or stops where it had)."""
-    from fem_ade.engine.config import RunConfig
+    from fem_ade.engine.config import RUN_FORMAT, RunConfig
     from fem_ade.engine.runs import recipe
 
     scene = replace(scene, params=set_parameter(scene.params, param, start))
@@ -910,7 +898,7 @@ def _branch_setup(scene, param: str, start: float, stop: float, step: float, n, 
     config.check(scene)
     identity = {"scene": scene.name, "params": scene.params.as_dict(), "param": param,
                 "from": start, "direction": "up" if stop > start else "down", "step": step,
-                "n": config.n, "options": options}
+                "n": config.n, "options": options, "format": RUN_FORMAT}
     return scene, config, json.loads(json.dumps(identity, default=str))
 
 

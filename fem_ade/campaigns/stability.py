@@ -260,11 +260,12 @@ def read_fields(path: Path) -> dict:
 
 def _branch_point(folder: Path, branch: Path):
     from fem_ade.backends.fem.axisym import SavedMeshBackend
+    from fem_ade.campaigns.identity import read_identity
     from fem_ade.model.params import Params
     from fem_ade.scenes.vesicle import set_parameter
 
     try:
-        identity = json.loads(branch.read_text())
+        identity = read_identity(branch.parent)
         row = json.loads((folder / "summary.json").read_text())
         params = Params(**identity["params"])
         params = set_parameter(params, identity["param"], float(row[identity["param"]]))

@@ -81,8 +81,7 @@ class RunConfig:
         options = dict(backend_options or {})
         counts = backend_class(backend, **options)
         options = counts.run_options(options)
-        # n: the nodes per axis the user gives, kept as the backend counts them (FEM: cells)
-        n = counts.default_n(scene, **options) if n is None else counts.cells(n, **options)
+        n = counts.default_n(scene, **options) if n is None else n  # nodes per axis
         dt = scene.dt if dt is None else dt
         if steps is None and until_steady is None:
             steps = scene.steps
@@ -148,19 +147,50 @@ class RunConfig:
 
     # -- run.json ---------------------------------------------------------------------------
     def to_mapping(self) -> dict:
-        return asdict(self)
+        """The configuration as run.json records it (and a checkpoint's identity): its fields
+        and the :data:`RUN_FORMAT` they are written in."""
+        return {**asdict(self), "format": RUN_FORMAT}
 
     @classmethod
     def from_mapping(cls, data) -> RunConfig:
-        """The configuration of a run.json (ModelError if a key is missing or unknown; the
-        values are checked by :meth:`check`)."""
+        """The configuration of a run.json of any :data:`RUN_FORMAT` (ModelError if a key is
+        missing; the values are checked by :meth:`check`)."""
         if not isinstance(data, dict):
             raise ModelError(f"a run configuration must be a table, got {type(data).__name__}")
+        data = upgraded(data)
         names = {f.name for f in fields(cls)}
         missing = sorted(names - set(data))
         if missing:
             raise ModelError(f"run.json lacks {', '.join(missing)}")
         return cls(**{k: data[k] for k in names})
+
+
+#: the format a run.json is written in: 2, ``n`` in nodes per axis (as ``--n`` and
+#: ``simulate(n=...)`` give it) for every backend; a run.json without ``format`` (1, before
+#: 2026-12) counted the FEM's ``n`` in cells of order p, and :func:`upgraded` reads it
+RUN_FORMAT = 2
+
+
+def upgraded(data: dict) -> dict:
+    """A run configuration's mapping (run.json's, or a checkpoint's identity's) in the
+    current :data:`RUN_FORMAT`: a format-1 FEM run on a tensor mesh has ``n`` cells of order
+    p, n·p nodes per axis; a mesh file's n was the grid already. Anything else is returned
+    as it is, for :meth:`RunConfig.check` to judge."""
+    if data.get("format", 1) != 1:
+        return data
+    data = {**data, "format": RUN_FORMAT}
+    options = data.get("backend_options")
+    if data.get("backend") == "fem" and isinstance(options, dict) and is_int(data.get("n"), 1):
+        from fem_ade.backends.base import backend_class
+
+        order = options.get("order", 1)
+        try:
+            tensor = backend_class("fem", **options).is_tensor(options.get("mesh"))
+        except ModelError:  # options no run takes: left to the checks
+            return data
+        if tensor and is_int(order, 1):
+            data["n"] = data["n"] * order
+    return data
 
 
 def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_every=None,

@@ -26,7 +26,7 @@ import numpy as np
 
 from fem_ade.backends.base import Backend, backend_class, make_backend
 from fem_ade.backends.threads import limit_threads
-from fem_ade.engine.config import RunConfig, option
+from fem_ade.engine.config import RunConfig, option, upgraded
 from fem_ade.engine.loop import AdaptiveDt, LoopState, RunResult, run_loop
 from fem_ade.model.params import HISTORY_COLUMNS, ModelError, is_real
 from fem_ade.scenes.catalogue import Scene, scene_from_mapping, scene_to_mapping
@@ -363,6 +363,8 @@ def _check_resumable(out: Path, steps: int | None):
     if identity is None or "config" not in identity or digests is None:
         raise ModelError(f"cannot resume {out}: its checkpoint.npz carries no checksums (an "
                          "older fem_ade wrote it): start the run again")
+    if isinstance(identity.get("config"), dict):  # a checkpoint of an older RUN_FORMAT
+        identity = {**identity, "config": upgraded(identity["config"])}
     difference = identity_difference(identity, run_identity(scene, config))
     if difference:
         raise ModelError(f"cannot resume {out}: its checkpoint.npz belongs to another run than "

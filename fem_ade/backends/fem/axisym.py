@@ -21,12 +21,12 @@ height, so that the paper's volume functional, whose far field carries part of �
 sees the far field of the box; ``domain="R,z0,z1"`` sets it (the result does not depend on it
 once the membrane is a few ε from its edges: ``tests/test_axisymmetric.py``).
 
-The mesh: ``uniform`` (cells of L/n) or ``graded[:m]`` (the default): cells of L/n over the
-box of the initial membrane widened by m·L (m = 0.05) on every side, and outside it cells
-that grow by :data:`GROWTH` per cell up to :data:`MAX_COARSE` times — the far field, where φ
-is −1 to many digits, costs a few cells. ``n`` counts cells per L at the finest spacing, as
-in 3D; its default follows ε (:data:`NODES_PER_EPS`). A run whose membrane leaves the fine
-zone says so (``info()["fine_zone"]``).
+The mesh: ``uniform`` (cells of h = L·p/n) or ``graded[:m]`` (the default): cells of h over
+the box of the initial membrane widened by m·L (m = 0.05) on every side, and outside it
+cells that grow by :data:`GROWTH` per cell up to :data:`MAX_COARSE` times — the far field,
+where φ is −1 to many digits, costs a few cells. ``n`` counts nodes per L at the finest
+spacing (n/p cells of order p), as in 3D; its default follows ε (:data:`NODES_PER_EPS`).
+A run whose membrane leaves the fine zone says so (``info()["fine_zone"]``).
 """
 
 from __future__ import annotations
@@ -130,8 +130,13 @@ def parse_domain(domain, L: float) -> tuple[float, float, float]:
 
 
 def default_cells(eps: float, L: float, order: int) -> int:
-    """Cells per L whose nodes are :data:`NODES_PER_EPS` per ε (the default n)."""
+    """Cells per L whose nodes are :data:`NODES_PER_EPS` per ε (at least 8)."""
     return max(8, math.ceil(L * NODES_PER_EPS / (eps * order) - 1e-9))
+
+
+def default_nodes(eps: float, L: float, order: int) -> int:
+    """The default n: nodes per L at the finest spacing, p times :func:`default_cells`."""
+    return order * default_cells(eps, L, order)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -176,7 +181,8 @@ def graded_vertices(lo: float, hi: float, a: float, b: float, h: float) -> np.nd
 @dataclass
 class RZMesh:
     """The tensor mesh of the half-plane: radial cell vertices ``r`` (from 0), axial ``z``,
-    the fine zone ((r_a, r_b), (z_a, z_b)) and the fine cell size ``h`` (= L/n)."""
+    the fine zone ((r_a, r_b), (z_a, z_b)) and the fine cell size ``h`` (L·p/n for n nodes
+    per L)."""
 
     kind: str
     r: np.ndarray
@@ -213,11 +219,12 @@ class RZMesh:
                 "margin": self.margin, "h_min": self.h_min, "h_max": self.h_max}
 
 
-def make_mesh(kind: str, margin, n: int, L: float, domain, band=None) -> RZMesh:
-    """The mesh of ``kind`` ("uniform" or "graded") with cells of L/n (graded: over ``band``,
-    the box ((r_a, r_b), (z_a, z_b)) of the initial membrane, widened by margin·L)."""
+def make_mesh(kind: str, margin, cells: int, L: float, domain, band=None) -> RZMesh:
+    """The mesh of ``kind`` ("uniform" or "graded") with cells of L/cells (graded: over
+    ``band``, the box ((r_a, r_b), (z_a, z_b)) of the initial membrane, widened by
+    margin·L)."""
     R, z0, z1 = domain
-    h = L / n
+    h = L / cells
     if kind == "uniform" or band is None:
         r = np.linspace(0.0, R, max(1, round(R / h)) + 1)
         z = np.linspace(z0, z1, max(1, round((z1 - z0) / h)) + 1)
@@ -270,9 +277,9 @@ class AxisymmetricFEMBackend(FEMBackend):
 
     Options beyond the Cartesian FEM's: ``geometry="axisymmetric"``; ``domain`` "R,z0,z1"
     (default: r ≤ L/√π, 0 ≤ z ≤ L); ``mesh`` "graded[:m]" (default) or "uniform"; ``order``
-    (default :data:`DEFAULT_ORDER`); ``n`` cells per L at the finest spacing (default
-    :func:`default_cells`). The step is solved exactly (``solver`` auto/fdm) or, as a check,
-    by PCG with AMG (``amg``, ``chebyshev``, ``jacobi``).
+    (default :data:`DEFAULT_ORDER`); ``n`` nodes per L at the finest spacing, n/p cells of
+    order p (default :func:`default_nodes`). The step is solved exactly (``solver``
+    auto/fdm) or, as a check, by PCG with AMG (``amg``, ``chebyshev``, ``jacobi``).
     """
 
     geometry = "axisymmetric"
@@ -294,10 +301,10 @@ class AxisymmetricFEMBackend(FEMBackend):
     # -- the protocol's class methods ---------------------------------------------------------
     @classmethod
     def default_n(cls, scene: Scene, *, order: int = DEFAULT_ORDER, **options) -> int:
-        """Cells per L with :data:`NODES_PER_EPS` nodes per ε (the scene's n is a 3D grid's)."""
+        """Nodes per L with :data:`NODES_PER_EPS` per ε (the scene's n is a 3D grid's)."""
         if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 1:
             order = DEFAULT_ORDER
-        return default_cells(scene.params.eps, scene.params.L, int(order))
+        return default_nodes(scene.params.eps, scene.params.L, int(order))
 
     @classmethod
     def run_options(cls, options: dict) -> dict:
@@ -314,12 +321,18 @@ class AxisymmetricFEMBackend(FEMBackend):
         return 4
 
     @classmethod
+    def is_tensor(cls, mesh) -> bool:
+        """Always: the (r, z) mesh is a tensor mesh (its option is checked by
+        :meth:`check_options`)."""
+        return True
+
+    @classmethod
     def memory_bytes(cls, scene: Scene, n: int, *, order: int = DEFAULT_ORDER, mesh=None,
                      domain=None, solver: str = "auto", **options) -> float:
         """At most a uniform mesh's: the state and work vectors per node, the dense 1D
         eigenbases, and with PCG + AMG the assembled low-order matrices."""
         R, z0, z1 = parse_domain(domain, scene.params.L)
-        per_L = float(order * n) / scene.params.L
+        per_L = float(n) / scene.params.L
         nr, nz = per_L * R + 1, per_L * (z1 - z0) + 1
         per_node = cls.bytes_per_dof if solver in ("auto", "fdm") else cls.bytes_per_krylov_dof
         return per_node * nr * nz + 16.0 * (nr * nr + nz * nz)
@@ -329,7 +342,7 @@ class AxisymmetricFEMBackend(FEMBackend):
                       solver: str = "auto", linalg: str = "numpy", rtol=None,
                       geometry: str = "axisymmetric", domain=None) -> float:
         """The scene (a surface of revolution), domain, mesh, order, solver; returns the
-        finest node spacing L/(n·p)."""
+        finest node spacing L/n."""
         from fem_ade.backends.base import check_choice
         from fem_ade.backends.fem.solve import EXACT
         from fem_ade.registry import FEM_ORDERS, FEM_SOLVERS
@@ -355,15 +368,16 @@ class AxisymmetricFEMBackend(FEMBackend):
         parse_mesh(mesh)
         R, z0, z1 = parse_domain(domain, scene.params.L)
         L = scene.params.L
-        if R < 2 * L / n or z1 - z0 < 2 * L / n:
-            raise ModelError(f"--domain {R:g},{z0:g},{z1:g} is less than 2 cells of L/n = "
-                             f"{L / n:.3g} across")
-        return L / (n * order)
+        h = L * order / n  # the finest cell
+        if R < 2 * h or z1 - z0 < 2 * h:
+            raise ModelError(f"--domain {R:g},{z0:g},{z1:g} is less than 2 cells of "
+                             f"L·p/n = {h:.3g} across")
+        return L / n
 
     # -- geometry ------------------------------------------------------------------------------
-    def _make_mesh(self, n: int, mesh):
+    def _make_mesh(self, cells: int, mesh):
         band = self._initial_band()  # also checks that the membrane is inside the domain
-        return make_mesh(self.mesh_kind, self.margin, n, self.params.L, self.domain,
+        return make_mesh(self.mesh_kind, self.margin, cells, self.params.L, self.domain,
                          band if self.mesh_kind == "graded" else None)
 
     def _space(self):
@@ -427,11 +441,11 @@ class AxisymmetricFEMBackend(FEMBackend):
         return self.phi.reshape(self.space.shape)
 
     def grid_phi(self) -> np.ndarray:
-        """φ revolved onto the scene box's uniform grid x_j = jL/m (m = p·n, at most
+        """φ revolved onto the scene box's uniform grid x_j = jL/m (m = n, at most
         :data:`GRID_LIMIT`): what a 3D run started from this one (``--phi0``) reads. Points
         beyond the half-plane's radius take its value at r = R."""
         L = self.params.L
-        m = max(8, min(self.order * self.n, GRID_LIMIT))
+        m = max(8, min(self.n, GRID_LIMIT))
         x = np.arange(m) * (L / m)
         ar, az = self.space.axes
         R = ar.nodes[-1]
@@ -477,8 +491,8 @@ class AxisymmetricFEMBackend(FEMBackend):
         return describe_axisymmetric(self, final, grid)
 
     def resolution_per_length(self) -> float:
-        """Nodes per L at the finest spacing (p·n): the in-run sharp comparison's test."""
-        return float(self.order * self.n)
+        """Nodes per L at the finest spacing (n): the in-run sharp comparison's test."""
+        return float(self.n)
 
     def info(self) -> dict:
         info = super().info()
@@ -508,8 +522,8 @@ class SavedMeshBackend(AxisymmetricFEMBackend):
     """An axisymmetric backend on the very mesh a saved field was computed on — its
     ``fields`` (:meth:`AxisymmetricFEMBackend.fields`: the cell vertices, the order, the fine
     zone, the axis) — at that field: what reads a branch point's or a run's end exactly
-    (its steady state on its own discretization). ``params`` the model's; ``n`` the cells per
-    L of the fine zone."""
+    (its steady state on its own discretization). ``params`` the model's; ``n`` the nodes per
+    L of the fine zone (the run's or branch's n)."""
 
     def __init__(self, params, fields: dict, *, n: int, constraints: str = "exact",
                  scheme: str = "stabilized"):
@@ -529,12 +543,12 @@ class SavedMeshBackend(AxisymmetricFEMBackend):
             raise ModelError(f"the saved field has {phi.size} nodes, its mesh {self.space.n_dofs}")
         self._set(phi, None)
 
-    def _make_mesh(self, n: int, mesh):
+    def _make_mesh(self, cells: int, mesh):
         f = self._saved
         ra, rb, za, zb = (float(x) for x in f["fine_zone"])
         L = self.params.L
         return RZMesh("graded", np.asarray(f["r_vertices"], dtype=float),
-                      np.asarray(f["z_vertices"], dtype=float), ((ra, rb), (za, zb)), L / n, L,
+                      np.asarray(f["z_vertices"], dtype=float), ((ra, rb), (za, zb)), L / cells, L,
                       DEFAULT_MARGIN)
 
 

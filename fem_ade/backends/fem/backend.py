@@ -71,7 +71,9 @@ class FEMBackend(BackendBase):
                              + ("" if domain is None else " without a --domain") + "; "
                              "make_backend('fem', ..., geometry=...) builds the one for it")
         self.order = order
-        self.mesh = self._make_mesh(n, mesh)
+        #: cells per axis (n/p on a tensor mesh; None for a mesh file, which sets its own)
+        self.cells = self.cells_per_axis(n, order, mesh)
+        self.mesh = self._make_mesh(self.cells, mesh)
         self.space = self._space()
         self.ops = self.space  # the space's operators (K, weights, doflocs)
         self.K, self.w = self.space.K, self.space.weights
@@ -111,7 +113,7 @@ class FEMBackend(BackendBase):
     def memory_bytes(cls, scene: Scene, n: int, *, order: int = 1, mesh=None,
                      solver: str = "auto", linalg: str = "numpy", rtol=None,
                      geometry: str = "cartesian", domain=None) -> float:
-        nodes = float(order * n) ** scene.dim
+        nodes = float(n) ** scene.dim
         kind, _ = fmesh.parse_option(mesh)
         if kind not in ("uniform", "graded"):
             return cls.bytes_per_assembled_dof * (1.2 if order > 1 else 1.0) * nodes
@@ -120,10 +122,11 @@ class FEMBackend(BackendBase):
 
     @classmethod
     def default_n(cls, scene: Scene, *, order: int = 1, **options) -> int:
-        """The scene's grid in nodes per axis: n = scene's n / p cells (at least 3)."""
+        """The scene's grid in nodes per axis, rounded to whole cells of order p (at least
+        :data:`fem_ade.backends.fem.mesh.MIN_CELLS` of them)."""
         if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order <= 1:
             return scene.n
-        return max(fmesh.MIN_CELLS, round(scene.n / int(order)))
+        return int(order) * max(fmesh.MIN_CELLS, round(scene.n / int(order)))
 
     @classmethod
     def run_options(cls, options: dict) -> dict:
@@ -136,36 +139,54 @@ class FEMBackend(BackendBase):
         return options
 
     @classmethod
-    def cells(cls, nodes, *, order: int = 1, mesh=None, **options):
-        """Cells per axis from ``nodes`` per axis: nodes/p on a tensor mesh, where p must
-        divide them and leave :meth:`min_cells`; a mesh file's n is not used (the file
-        sets the resolution), so it is returned as it is."""
-        counts = is_int(nodes, 1) and is_int(order, 1)
-        tensor = fmesh.parse_option(mesh)[0] in ("uniform", "graded") if counts else False
-        if not tensor:
-            return nodes
-        least = int(order) * cls.min_cells(order=order, mesh=mesh, **options)
-        if nodes < least:
-            raise ModelError(f"--n {nodes}: the FEM of order {order} needs at least {least} "
-                             f"nodes per axis ({least // order} cells of {order} + 1 nodes)")
-        if nodes % order:
-            low = nodes // order * order
-            raise ModelError(f"--n {nodes} nodes per axis is not a multiple of the order "
-                             f"{order} (the FEM has order x cells nodes per axis): give "
-                             f"{max(low, least)} or {low + order}")
-        return int(nodes) // int(order)
+    def is_tensor(cls, mesh) -> bool:
+        """Whether ``mesh`` (the ``mesh`` option) is a tensor mesh, uniform or graded — whose
+        n nodes per axis are n/p cells of p + 1 GLL nodes — rather than a mesh file, which
+        sets its own resolution (its n is only the grid the shape is measured on)."""
+        return fmesh.parse_option(mesh)[0] in ("uniform", "graded")
 
     @classmethod
-    def nodes_per_axis(cls, n: int, *, order: int = 1, mesh=None, **options) -> int | None:
-        """p·n on a tensor mesh (uniform or graded); None for a mesh file."""
-        return int(order) * n if fmesh.parse_option(mesh)[0] in ("uniform", "graded") else None
+    def cells_per_axis(cls, n: int, order: int, mesh=None) -> int | None:
+        """The cells per axis of n nodes per axis on a tensor mesh (n/p), None for a mesh
+        file; n is checked first (:meth:`check_n`)."""
+        cls.check_n(n, order=order, mesh=mesh)
+        return int(n) // int(order) if cls.is_tensor(mesh) else None
+
+    @classmethod
+    def check_n(cls, n, *, order: int = 1, mesh=None, **options) -> None:
+        """n nodes per axis: on a tensor mesh p·c for c >= :meth:`min_cells` cells of
+        order p; any n >= 8 on a mesh file (the grid its shape is measured on)."""
+        counts = is_int(n, 1) and is_int(order, 1)
+        if not (counts and cls.is_tensor(mesh)):
+            return super().check_n(n, order=order, mesh=mesh, **options)
+        least = cls.min_n(order=order, mesh=mesh, **options)
+        if n < least:
+            raise ModelError(f"n (--n) = {n}: the FEM of order {order} needs at least {least} "
+                             f"nodes per axis ({least // order} cells of {order} + 1 nodes)")
+        if n % order:
+            low = n // order * order
+            raise ModelError(f"n (--n) = {n} nodes per axis is not a multiple of the order "
+                             f"{order} (the FEM has order x cells nodes per axis): give "
+                             f"{max(low, least)} or {low + order}")
+
+    @classmethod
+    def nodes_per_axis(cls, n: int, *, mesh=None, **options) -> int | None:
+        """n on a tensor mesh (uniform or graded); None for a mesh file."""
+        return n if cls.is_tensor(mesh) else None
 
     @classmethod
     def min_cells(cls, *, order: int = 1, **options) -> int:
-        """At least 3 cells per axis (a periodic mesh) and 8 nodes (p·n ≥ 8)."""
+        """At least 3 cells per axis (a periodic mesh) and 8 nodes (p·c ≥ 8)."""
         if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 1:
             return 8
         return max(fmesh.MIN_CELLS, -(-8 // int(order)))
+
+    @classmethod
+    def min_n(cls, *, order: int = 1, mesh=None, **options) -> int:
+        """p times :meth:`min_cells` on a tensor mesh; 8 on a mesh file."""
+        if not (is_int(order, 1) and cls.is_tensor(mesh)):
+            return 8
+        return int(order) * cls.min_cells(order=order, **options)
 
     @classmethod
     def check_options(cls, scene: Scene, n: int, *, order: int = 1, mesh=None,
@@ -214,7 +235,9 @@ class FEMBackend(BackendBase):
         # the resolution: the mean node spacing of the largest cell, h/p (nodes per axis p·n;
         # the GLL gaps inside a cell range from 0.35 to 1.6 times it at p = 8)
         if kind == "uniform":
-            return scene.params.L / (n * order)
+            return scene.params.L / n
+        if kind == "graded":
+            return fmesh.make(scene.dim, n // order, scene.params.L, mesh).h_max / order
         return fmesh.make(scene.dim, n, scene.params.L, mesh).h_max / order
 
     def set_dt(self, dt: float) -> None:
@@ -227,9 +250,9 @@ class FEMBackend(BackendBase):
         self.stepper.set_dt(self.dt, self.phi, self.mu, self.Kphi)
         self._setup.setdefault("solver_setup_s", time.perf_counter() - t0)
 
-    def _make_mesh(self, n: int, mesh):
-        """The mesh (:func:`fem_ade.backends.fem.mesh.make`)."""
-        return fmesh.make(self.scene.dim, n, self.params.L, mesh)
+    def _make_mesh(self, cells: int | None, mesh):
+        """The mesh of ``cells`` per axis (:func:`fem_ade.backends.fem.mesh.make`)."""
+        return fmesh.make(self.scene.dim, cells, self.params.L, mesh)
 
     def _space(self):
         """The FEM space (:func:`fem_ade.backends.fem.assemble.space`)."""
@@ -257,7 +280,8 @@ class FEMBackend(BackendBase):
         phi = np.array(state.get("phi", np.zeros(0)), dtype=float).ravel()
         if phi.shape != (self.space.n_dofs,):
             raise ModelError(f"the state has {phi.size} values of phi; this FEM space "
-                             f"(order {self.order}, n = {self.n}) has {self.space.n_dofs}")
+                             f"(order {self.order}, n = {self.n} nodes per axis) has "
+                             f"{self.space.n_dofs}")
         prev = state.get("phi_prev")
         prev = None if prev is None else np.array(prev, dtype=float).ravel()
         self._set(phi, prev)
@@ -286,15 +310,14 @@ class FEMBackend(BackendBase):
                 "points": self.space.doflocs.copy()}
 
     def grid_phi(self) -> np.ndarray:
-        """φ on the uniform periodic grid x_j = jL/m, m = order·n: the element's own
+        """φ on the uniform periodic grid x_j = jL/m, m = n: the element's own
         interpolant on tensor meshes (exact to its order; the nodes themselves for p = 1 on a
         uniform mesh), linear interpolation on a mesh file."""
-        return output.uniform_grid_field(self.mesh, self.space, self.phi,
-                                         self.order * self.n)[0]
+        return output.uniform_grid_field(self.mesh, self.space, self.phi, self.n)[0]
 
     def resolution_per_length(self) -> float:
-        """p·n: the nodes per axis of :meth:`grid_phi`."""
-        return float(self.order * self.n)
+        """n: the nodes per axis of :meth:`grid_phi`."""
+        return float(self.n)
 
     def output_mesh(self):
         """(points (P, 3), [(cell type, connectivity)]) with the periodic images closed.
@@ -319,7 +342,7 @@ class FEMBackend(BackendBase):
         basis = self.stepper.eigenbasis
         if solver is None and basis is not None:  # before the first Δt: what auto will take
             kind = "fft" if basis.fourier else "fdm"
-        grid = (f"n = {self.n} cells, {self.order * self.n} nodes per axis"
+        grid = (f"n = {self.n} nodes per axis, {self.cells} cells"
                 if self.mesh.is_tensor else
                 f"mesh file {Path(self.mesh.source).name}, {self.space.n_dofs} nodes")
         return {

@@ -453,7 +453,8 @@ class PETScFEMBackend(FEMBackend):
         phi = np.array(state.get("phi", np.zeros(0)), dtype=float).ravel()
         if phi.shape != (self.space.n_dofs,):
             raise ModelError(f"the state has {phi.size} values of phi; this FEM space "
-                             f"(order {self.order}, n = {self.n}) has {self.space.n_dofs}")
+                             f"(order {self.order}, n = {self.n} nodes per axis) has "
+                             f"{self.space.n_dofs}")
         local = {k: (self.part.local(np.asarray(v, dtype=float).ravel())
                      if k in ("phi", "mu", "phi_prev", "z_V", "z_A") else v)
                  for k, v in state.items()}
@@ -476,7 +477,7 @@ class PETScFEMBackend(FEMBackend):
 
     def grid_phi(self) -> np.ndarray:
         return output.uniform_grid_field(self.mesh, self._view(), self.part.gather(self.phi),
-                                         self.order * self.n)[0]
+                                         self.n)[0]
 
     def output_mesh(self):
         if self._out is None:
