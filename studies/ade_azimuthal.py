@@ -36,7 +36,6 @@ os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
 
 import argparse  # noqa: E402
 import json  # noqa: E402
-import sys  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -70,13 +69,12 @@ def cell_name(cell: dict) -> str:
 
 
 def scene_of(cell: dict):
-    """The seed of the cell's branch at its (v, Δa₀): the vesicle family's (the pear's as
-    the ADE-lines study makes it)."""
+    """The seed of the cell's branch at its (v, Δa₀): the vesicle family's (the pear's from
+    :mod:`fem_ade.scenes.pear`, as the ADE-lines study makes it)."""
     if cell["branch"] == "pear":
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from ade_branches import pear_scene
+        from fem_ade.scenes.pear import pear_scene
 
-        return pear_scene(cell["v"], cell["da0"], cell["eps"], cell["R0"])
+        return pear_scene(cell["v"], cell["da0"], cell["eps"], cell["R0"], KBAR)
     from fem_ade.scenes.catalogue import vesicle_scene
 
     return vesicle_scene(v=cell["v"], da0=cell["da0"], kbar=KBAR, eps=cell["eps"],

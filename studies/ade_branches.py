@@ -156,8 +156,8 @@ def line_name(v: float, name: str) -> str:
 
 def line_point(key: dict) -> dict:
     """A line as a listed point of the branch sweep: the vesicle of its branch at the line's
-    start, or the pear's seed made here (:func:`pear_scene`) as the point's own scene;
-    ModelError where the pear has none."""
+    start, or the pear's seed (:func:`fem_ade.scenes.pear.pear_scene`, by continuation where
+    it must) as the point's own scene; ModelError where the pear has none."""
     branch = {"param": "da0", "from": key["from"], "to": key["to"], "step": key["step"],
               "folds": 0}
     spec = {"name": line_name(key["v"], key["line"]), "seed": key["branch"],
@@ -165,22 +165,11 @@ def line_point(key: dict) -> dict:
             "scene": {"v": key["v"], "kbar": KBAR, "eps": key["eps"], "R0": key["R0"]}}
     if key["branch"] == "pear":
         from fem_ade.scenes.catalogue import scene_to_mapping
+        from fem_ade.scenes.pear import pear_scene
 
         spec.update(base=scene_to_mapping(pear_scene(key["v"], key["from"], key["eps"],
-                                                     key["R0"])), scene={})
+                                                     key["R0"], KBAR)), scene={})
     return spec
-
-
-def pear_scene(v: float, m0: float, eps: float, R0: float):
-    """The pear's seed at Δa₀ = ``m0``: the ``vesicle`` family's, or where ``sharp_ref`` finds
-    no pear there from scratch, :func:`continued_pear`."""
-    from fem_ade.model.params import ModelError
-    from fem_ade.scenes.catalogue import vesicle_scene
-
-    try:
-        return vesicle_scene(v=v, da0=m0, kbar=KBAR, eps=eps, branch="pear", R0=R0)
-    except ModelError:
-        return continued_pear(v, m0, eps, R0)
 
 
 def run_lines(base: Path, keys: list[dict], archive: dict, workers: int) -> None:
@@ -225,35 +214,6 @@ def archive_line(folder: Path, key: dict) -> dict:
                 "missing": reason.removeprefix("ModelError: ")}
     rows = [_plain(r) for r in read_branch_table(folder)]
     return {"key": key, "rows": rows, "missing": None, "seconds": summary.get("seconds")}
-
-
-def continued_pear(v: float, m0: float, eps: float, R0: float):
-    """The vesicle scene seeded with the sharp pear at ``m0`` found by continuation down from
-    m₀ = 1.64 (where ``sharp_ref`` finds it from scratch; at 1.54 on v = 0.8 and 0.85 it
-    does not)."""
-    from dataclasses import replace
-
-    import numpy as np
-
-    from fem_ade.model.params import ModelError
-    from fem_ade.scenes.catalogue import vesicle_scene
-    from fem_ade.scenes.initial import Meridian
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from ade_plane import follow as sharp_follow
-
-    grid = (m0, *np.round(np.arange(m0 + 0.04, 1.64, 0.04), 4), 1.64)
-    rows = sharp_follow("pear", v, SimpleNamespace(m0=grid, anchor={"pear": 1.64}),
-                        say=lambda text: None)
-    if "r" not in rows[0]:
-        raise ModelError(f"no sharp pear at v = {v}, m0 = {m0}, even by continuation")
-    scene = vesicle_scene(v=v, da0=m0, kbar=KBAR, eps=eps, branch="prolate", R0=R0)
-    ic = Meridian(centre=scene.ic.centre, r=tuple(max(float(x), 0.0) for x in rows[0]["r"]),
-                  z=tuple(float(x) for x in rows[0]["z"]), scale=R0)
-    ic.check(3)
-    return replace(scene, ic=ic, shape="pear", description=scene.description.replace(
-        "branch = prolate", "branch = pear").split("; seeded from")[0]
-        + "; seeded from the sharp pear (by continuation from m0 = 1.64)")
 
 
 def _plain(row: dict) -> dict:
