@@ -29,12 +29,10 @@ One thread per worker: ``OPENBLAS_NUM_THREADS=1``, ``FEM_ADE_FFT_WORKERS=1`` unl
 
 from __future__ import annotations
 
-import os
+from _lib.cli import one_thread, study_parser
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+one_thread()
 
-import argparse  # noqa: E402
 import json  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -220,11 +218,8 @@ def draw(path: Path, result: dict) -> None:
 def main(argv=None) -> dict:
     from fem_ade.store.output import write_json_atomic
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=OUT)
-    ap.add_argument("--quick", action="store_true", help="two cells at ε = 0.04, m ≤ 3")
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--report-only", action="store_true")
+    ap = study_parser(__doc__, OUT, quick="two cells at ε = 0.04, m ≤ 3", workers="",
+                      report_only="")
     args = ap.parse_args(argv)
     suffix = "_quick" if args.quick else ""
     if args.quick:

@@ -40,18 +40,18 @@ Two processes (``--workers``), each with one BLAS thread and one FFT worker.
 
 from __future__ import annotations
 
-import os
+from _lib.cli import one_thread, study_parser
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+one_thread()
 
-import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
-import sys  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
+
+from _lib.lines import line_name  # noqa: E402
+from _lib.sharp import sharp_line  # noqa: E402
 
 OUT = Path("runs") / "studies"
 KBAR = 1.4
@@ -149,11 +149,6 @@ def line_key(v: float, branch: str, name: str, span, R0: float, eps: float, step
             "R0": R0, "eps": eps, "kbar": KBAR, "step": step, "physics": PHYSICS_VERSION}
 
 
-def line_name(v: float, name: str) -> str:
-    """A line's point in the sweep (its folder's name)."""
-    return f"v={v:g}_{name}"
-
-
 def line_point(key: dict) -> dict:
     """A line as a listed point of the branch sweep: the vesicle of its branch at the line's
     start, or the pear's seed (:func:`fem_ade.scenes.pear.pear_scene`, by continuation where
@@ -220,31 +215,6 @@ def _plain(row: dict) -> dict:
     keep = ("da0", "e", "E", "W", "G", "v_surface", "da_surface", "label", "unstable",
             "lowest_eigenvalue", "fold", "newton", "seconds")
     return {k: row.get(k) for k in keep}
-
-
-def sharp_line(out: str, branch: str, v: float, grid) -> dict:
-    """One sharp branch continued along the m₀ grid at one v (a worker's task)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from ade_plane import follow as sharp_follow
-
-    from fem_ade.store.output import write_json_atomic
-
-    path = Path(out)
-    if path.is_file():
-        return json.loads(path.read_text())
-    rows = []
-    for anchor in ANCHORS[branch]:
-        if anchor < grid[0] or anchor > grid[-1]:
-            continue
-        plane = SimpleNamespace(m0=grid, anchor={branch: anchor})
-        rows = sharp_follow(branch, v, plane, say=lambda text: None)
-        if any("e" in r for r in rows):
-            break
-    rows = [{k: r[k] for k in ("m0", "e", "w", "da") if k in r} for r in rows if "e" in r]
-    result = {"branch": branch, "v": v, "rows": rows}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(path, result)
-    return result
 
 
 # ---------------------------------------------------------------------------------------------
@@ -401,12 +371,9 @@ def _end(res: dict, branch: str, sharp: dict) -> str:
 # the study
 # ---------------------------------------------------------------------------------------------
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=OUT)
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--quick", action="store_true", help="one short line at eps = 0.04")
-    ap.add_argument("--report-only", action="store_true",
-                    help="from the archived lines and sharp solves; solve and follow nothing")
+    ap = study_parser(__doc__, OUT, quick="one short line at eps = 0.04", workers="",
+                      report_only="from the archived lines and sharp solves; solve and "
+                      "follow nothing")
     args = ap.parse_args(argv)
     q = args.quick
     eps, v_list, da0_list = (QUICK.eps, QUICK.v, QUICK.da0) if q else (EPS, V, DA0)
@@ -443,16 +410,14 @@ def main(argv=None) -> dict:
 def sharp_lines(base: Path, v_list, branches, grid, workers: int) -> dict:
     """{v: {branch: rows}}: each sharp branch continued along the m₀ grid, one task per
     (v, branch) on ``workers`` processes, each kept in ``base/sharp/BRANCH-v=V.json``
-    (:func:`sharp_line`; a kept one is read back). These are ``sharp_ref`` solves, not runs:
-    a cache file each, as the sharp-limit study keeps its solves, so they are not sweep
-    points."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import ade_branches as tasks  # the workers' functions, by a name they can import
-
+    (:func:`_lib.sharp.sharp_line`, from the first of its ``ANCHORS`` that reaches it; a
+    kept one is read back). These are ``sharp_ref`` solves, not runs: a cache file each, as
+    the sharp-limit study keeps its solves, so they are not sweep points."""
     sharp = {v: {} for v in v_list}
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        jobs = {(v, b): pool.submit(tasks.sharp_line, str(base / "sharp" / f"{b}-v={v:g}.json"),
-                                    b, v, grid) for v in v_list for b in branches}
+        jobs = {(v, b): pool.submit(sharp_line, str(base / "sharp" / f"{b}-v={v:g}.json"),
+                                    b, v, grid, ANCHORS[b], KBAR)
+                for v in v_list for b in branches}
         for (v, b), job in jobs.items():
             sharp[v][b] = job.result()["rows"]
             print(f"sharp {b} at v = {v}: {len(sharp[v][b])} points", flush=True)
