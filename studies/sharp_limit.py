@@ -24,8 +24,8 @@ of a sharp sphere in the model's units. The observed order p from the three smal
 Richardson over the two smallest: e₀ = e(ε₂) − (e(ε₁) − e(ε₂)) / ((ε₁/ε₂)^p − 1). A run
 keeps its branch if its surface is one body of genus 0 (1 for the torus) with the branch's
 label (prolate/cylinder/gourd/chain, oblate/discocyte; any genus-0 label for the sphere and
-the stomatocyte) and reduced area difference within 0.12 of the sharp one (see ``LABELS``).
-With two such ε only, p = 2 is assumed (marked).
+the stomatocyte) and reduced area difference within 0.12 of the sharp one (see
+``_lib.seeded.LABELS``). With two such ε only, p = 2 is assumed (marked).
 
 Results: ``OUT/sharp_limit.md`` (tables), ``OUT/sharp_limit.json`` (``rows``: one per
 (backend, branch, v) with e_sharp, e_extrapolated, rel_diff, eps, e_phase_field,
