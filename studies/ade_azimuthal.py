@@ -29,14 +29,11 @@ One thread per worker: ``OPENBLAS_NUM_THREADS=1``, ``FEM_ADE_FFT_WORKERS=1`` unl
 
 from __future__ import annotations
 
-import os
+from _lib.cli import one_thread, study_parser
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+one_thread()
 
-import argparse  # noqa: E402
 import json  # noqa: E402
-import sys  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -70,13 +67,12 @@ def cell_name(cell: dict) -> str:
 
 
 def scene_of(cell: dict):
-    """The seed of the cell's branch at its (v, Δa₀): the vesicle family's (the pear's as
-    the ADE-lines study makes it)."""
+    """The seed of the cell's branch at its (v, Δa₀): the vesicle family's (the pear's from
+    :mod:`fem_ade.scenes.pear`, as the ADE-lines study makes it)."""
     if cell["branch"] == "pear":
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from ade_branches import pear_scene
+        from fem_ade.scenes.pear import pear_scene
 
-        return pear_scene(cell["v"], cell["da0"], cell["eps"], cell["R0"])
+        return pear_scene(cell["v"], cell["da0"], cell["eps"], cell["R0"], KBAR)
     from fem_ade.scenes.catalogue import vesicle_scene
 
     return vesicle_scene(v=cell["v"], da0=cell["da0"], kbar=KBAR, eps=cell["eps"],
@@ -222,11 +218,8 @@ def draw(path: Path, result: dict) -> None:
 def main(argv=None) -> dict:
     from fem_ade.store.output import write_json_atomic
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=OUT)
-    ap.add_argument("--quick", action="store_true", help="two cells at ε = 0.04, m ≤ 3")
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--report-only", action="store_true")
+    ap = study_parser(__doc__, OUT, quick="two cells at ε = 0.04, m ≤ 3", workers="",
+                      report_only="")
     args = ap.parse_args(argv)
     suffix = "_quick" if args.quick else ""
     if args.quick:

@@ -40,18 +40,18 @@ Two processes (``--workers``), each with one BLAS thread and one FFT worker.
 
 from __future__ import annotations
 
-import os
+from _lib.cli import one_thread, study_parser
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+one_thread()
 
-import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
-import sys  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
+
+from _lib.lines import line_name  # noqa: E402
+from _lib.sharp import sharp_line  # noqa: E402
 
 OUT = Path("runs") / "studies"
 KBAR = 1.4
@@ -149,15 +149,10 @@ def line_key(v: float, branch: str, name: str, span, R0: float, eps: float, step
             "R0": R0, "eps": eps, "kbar": KBAR, "step": step, "physics": PHYSICS_VERSION}
 
 
-def line_name(v: float, name: str) -> str:
-    """A line's point in the sweep (its folder's name)."""
-    return f"v={v:g}_{name}"
-
-
 def line_point(key: dict) -> dict:
     """A line as a listed point of the branch sweep: the vesicle of its branch at the line's
-    start, or the pear's seed made here (:func:`pear_scene`) as the point's own scene;
-    ModelError where the pear has none."""
+    start, or the pear's seed (:func:`fem_ade.scenes.pear.pear_scene`, by continuation where
+    it must) as the point's own scene; ModelError where the pear has none."""
     branch = {"param": "da0", "from": key["from"], "to": key["to"], "step": key["step"],
               "folds": 0}
     spec = {"name": line_name(key["v"], key["line"]), "seed": key["branch"],
@@ -165,22 +160,11 @@ def line_point(key: dict) -> dict:
             "scene": {"v": key["v"], "kbar": KBAR, "eps": key["eps"], "R0": key["R0"]}}
     if key["branch"] == "pear":
         from fem_ade.scenes.catalogue import scene_to_mapping
+        from fem_ade.scenes.pear import pear_scene
 
         spec.update(base=scene_to_mapping(pear_scene(key["v"], key["from"], key["eps"],
-                                                     key["R0"])), scene={})
+                                                     key["R0"], KBAR)), scene={})
     return spec
-
-
-def pear_scene(v: float, m0: float, eps: float, R0: float):
-    """The pear's seed at Δa₀ = ``m0``: the ``vesicle`` family's, or where ``sharp_ref`` finds
-    no pear there from scratch, :func:`continued_pear`."""
-    from fem_ade.model.params import ModelError
-    from fem_ade.scenes.catalogue import vesicle_scene
-
-    try:
-        return vesicle_scene(v=v, da0=m0, kbar=KBAR, eps=eps, branch="pear", R0=R0)
-    except ModelError:
-        return continued_pear(v, m0, eps, R0)
 
 
 def run_lines(base: Path, keys: list[dict], archive: dict, workers: int) -> None:
@@ -227,64 +211,10 @@ def archive_line(folder: Path, key: dict) -> dict:
     return {"key": key, "rows": rows, "missing": None, "seconds": summary.get("seconds")}
 
 
-def continued_pear(v: float, m0: float, eps: float, R0: float):
-    """The vesicle scene seeded with the sharp pear at ``m0`` found by continuation down from
-    m₀ = 1.64 (where ``sharp_ref`` finds it from scratch; at 1.54 on v = 0.8 and 0.85 it
-    does not)."""
-    from dataclasses import replace
-
-    import numpy as np
-
-    from fem_ade.model.params import ModelError
-    from fem_ade.scenes.catalogue import vesicle_scene
-    from fem_ade.scenes.initial import Meridian
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from ade_plane import follow as sharp_follow
-
-    grid = (m0, *np.round(np.arange(m0 + 0.04, 1.64, 0.04), 4), 1.64)
-    rows = sharp_follow("pear", v, SimpleNamespace(m0=grid, anchor={"pear": 1.64}),
-                        say=lambda text: None)
-    if "r" not in rows[0]:
-        raise ModelError(f"no sharp pear at v = {v}, m0 = {m0}, even by continuation")
-    scene = vesicle_scene(v=v, da0=m0, kbar=KBAR, eps=eps, branch="prolate", R0=R0)
-    ic = Meridian(centre=scene.ic.centre, r=tuple(max(float(x), 0.0) for x in rows[0]["r"]),
-                  z=tuple(float(x) for x in rows[0]["z"]), scale=R0)
-    ic.check(3)
-    return replace(scene, ic=ic, shape="pear", description=scene.description.replace(
-        "branch = prolate", "branch = pear").split("; seeded from")[0]
-        + "; seeded from the sharp pear (by continuation from m0 = 1.64)")
-
-
 def _plain(row: dict) -> dict:
     keep = ("da0", "e", "E", "W", "G", "v_surface", "da_surface", "label", "unstable",
             "lowest_eigenvalue", "fold", "newton", "seconds")
     return {k: row.get(k) for k in keep}
-
-
-def sharp_line(out: str, branch: str, v: float, grid) -> dict:
-    """One sharp branch continued along the m₀ grid at one v (a worker's task)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from ade_plane import follow as sharp_follow
-
-    from fem_ade.store.output import write_json_atomic
-
-    path = Path(out)
-    if path.is_file():
-        return json.loads(path.read_text())
-    rows = []
-    for anchor in ANCHORS[branch]:
-        if anchor < grid[0] or anchor > grid[-1]:
-            continue
-        plane = SimpleNamespace(m0=grid, anchor={branch: anchor})
-        rows = sharp_follow(branch, v, plane, say=lambda text: None)
-        if any("e" in r for r in rows):
-            break
-    rows = [{k: r[k] for k in ("m0", "e", "w", "da") if k in r} for r in rows if "e" in r]
-    result = {"branch": branch, "v": v, "rows": rows}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(path, result)
-    return result
 
 
 # ---------------------------------------------------------------------------------------------
@@ -441,12 +371,9 @@ def _end(res: dict, branch: str, sharp: dict) -> str:
 # the study
 # ---------------------------------------------------------------------------------------------
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=OUT)
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--quick", action="store_true", help="one short line at eps = 0.04")
-    ap.add_argument("--report-only", action="store_true",
-                    help="from the archived lines and sharp solves; solve and follow nothing")
+    ap = study_parser(__doc__, OUT, quick="one short line at eps = 0.04", workers="",
+                      report_only="from the archived lines and sharp solves; solve and "
+                      "follow nothing")
     args = ap.parse_args(argv)
     q = args.quick
     eps, v_list, da0_list = (QUICK.eps, QUICK.v, QUICK.da0) if q else (EPS, V, DA0)
@@ -483,16 +410,14 @@ def main(argv=None) -> dict:
 def sharp_lines(base: Path, v_list, branches, grid, workers: int) -> dict:
     """{v: {branch: rows}}: each sharp branch continued along the m₀ grid, one task per
     (v, branch) on ``workers`` processes, each kept in ``base/sharp/BRANCH-v=V.json``
-    (:func:`sharp_line`; a kept one is read back). These are ``sharp_ref`` solves, not runs:
-    a cache file each, as the sharp-limit study keeps its solves, so they are not sweep
-    points."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import ade_branches as tasks  # the workers' functions, by a name they can import
-
+    (:func:`_lib.sharp.sharp_line`, from the first of its ``ANCHORS`` that reaches it; a
+    kept one is read back). These are ``sharp_ref`` solves, not runs: a cache file each, as
+    the sharp-limit study keeps its solves, so they are not sweep points."""
     sharp = {v: {} for v in v_list}
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        jobs = {(v, b): pool.submit(tasks.sharp_line, str(base / "sharp" / f"{b}-v={v:g}.json"),
-                                    b, v, grid) for v in v_list for b in branches}
+        jobs = {(v, b): pool.submit(sharp_line, str(base / "sharp" / f"{b}-v={v:g}.json"),
+                                    b, v, grid, ANCHORS[b], KBAR)
+                for v in v_list for b in branches}
         for (v, b), job in jobs.items():
             sharp[v][b] = job.result()["rows"]
             print(f"sharp {b} at v = {v}: {len(sharp[v][b])} points", flush=True)

@@ -13,7 +13,7 @@ At κ̄/κ = 1.4 (the paper's) and two reduced volumes — v = 0.85 (prolate ↔
 * **phase field** (spectral, ε = 0.02, n = 64: ε/h = 1.28, as in the sharp-limit study): at
   a few m₀ around each sharp transition, a steady state seeded from each branch's sharp shape
   there (initial condition ``meridian``), ADE on with ΔA₀ = 8πDR₀·m₀ and exact constraints
-  with the localized volume (``sharp_limit.make_runs``: one sweep on two Dask workers);
+  with the localized volume (``_lib.seeded.make_runs``: one sweep on two Dask workers);
   e = (W + G)/W_sphere. A run keeps its seed's branch if it ends as one body whose
   sharp-surface reduced area difference is within 0.12 of its sharp shape's (the pear's da
   is 0.17–0.2 above the prolate's, the stomatocyte's 0.4–0.6 below the oblate's); the phase
@@ -29,21 +29,18 @@ run cached in ``OUT/ade/solves.json`` and ``OUT/ade/runs.json`` (resumable).
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
-import sys
-import time
 from pathlib import Path
 from types import SimpleNamespace
 
+from _lib.cli import study_parser
+from _lib.seeded import DA_TOL, make_runs
+from _lib.sharp import follow
 from fem_ade.plots.render import save_figure
 from fem_ade.store.output import write_json_atomic
-from sharp_ref.branches import LEVELS, solve
-from sharp_ref.membrane import Q_ADE, BranchError
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # the sharp-limit study beside it
-from sharp_limit import DA_TOL, make_runs  # noqa: E402
+from sharp_ref.branches import LEVELS
+from sharp_ref.membrane import Q_ADE
 
 DEFAULT_OUT = Path("runs/studies")
 KBAR = 1.4
@@ -66,45 +63,10 @@ QUICK = {0.85: Plane(branches=("prolate", "pear"), m0=(1.76, 1.8), levels=LEVELS
                      anchor={"prolate": 1.8, "pear": 1.8}, pf={1.8: ("prolate", "pear")})}
 #: the quick look's phase field: coarse and short
 QUICK_EPS = 0.05
-LEVELS_USED = LEVELS[:3]  # energies to ~1e-7: ample beside the phase field's ε error
 
 
 def _key(branch: str, v: float) -> str:
     return f"{branch}@{v:.4f}"
-
-
-def follow(branch: str, v: float, plane, say=print) -> list[dict]:
-    """The branch along the plane's m₀ grid: solved at its anchor, then continued up and down
-    the grid (each solve starting from its neighbour's shape) until it is lost."""
-    grid = list(plane.m0)
-    a = min(range(len(grid)), key=lambda i: abs(grid[i] - plane.anchor[branch]))
-    rows = {}
-
-    def one(i, start):
-        t0 = time.perf_counter()
-        try:
-            r = solve(branch, v, m0=grid[i], kbar=KBAR, tol=1e-7,
-                      levels=getattr(plane, "levels", LEVELS_USED),
-                      start=start)
-        except BranchError as err:
-            rows[i] = {"branch": branch, "v": v, "m0": grid[i], "missing": str(err)}
-            say(f"  {branch} v = {v} m0 = {grid[i]}: {err}")
-            return None
-        j = r.to_json(points=101)
-        rows[i] = {"branch": branch, "v": v, "m0": grid[i], "e": r.e, "w": r.w, "da": r.da,
-                   "residual": r.residual, "seconds": round(time.perf_counter() - t0, 1),
-                   "r": [round(x, 7) for x in j["r"]], "z": [round(x, 7) for x in j["z"]]}
-        say(f"  {branch} v = {v} m0 = {grid[i]}: e = {r.e:.6f} da = {r.da:.5f}")
-        return r
-
-    anchor = one(a, None)
-    for direction in (1, -1):
-        r = anchor
-        i = a + direction
-        while r is not None and 0 <= i < len(grid):
-            r = one(i, r)
-            i += direction
-    return [rows[i] for i in sorted(rows)]
 
 
 def lowest(rows_by_branch: dict[str, list[dict]], grid) -> list[dict]:
@@ -143,7 +105,7 @@ def sharp_stage(out: Path, planes, say=print) -> dict:
         for b in plane.branches:
             done = cache.get(_key(b, v), {})
             if done.get("grid") != list(plane.m0) or done.get("anchor") != plane.anchor[b]:
-                rows = follow(b, v, plane, say)
+                rows = follow(b, v, plane, kbar=KBAR, say=say)
                 for r in rows:  # the meridian only where a phase-field run starts from it
                     if r["m0"] not in plane.pf:
                         r.pop("r", None), r.pop("z", None)
@@ -358,11 +320,9 @@ def figure(path: Path, planes, cache, runs, eps) -> None:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT,
-                    help="default %(default)s; the committed results: studies/results")
-    ap.add_argument("--quick", action="store_true", help="one point of v = 0.85, ε = 0.05")
-    ap.add_argument("--report-only", action="store_true")
+    ap = study_parser(__doc__, DEFAULT_OUT, first_line=True,
+                      out_help="default %(default)s; the committed results: studies/results",
+                      quick="one point of v = 0.85, ε = 0.05", report_only="")
     args = ap.parse_args(argv)
     planes, eps = (QUICK, QUICK_EPS) if args.quick else (FULL, EPS)
     args.out.mkdir(parents=True, exist_ok=True)

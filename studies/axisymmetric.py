@@ -35,10 +35,9 @@ they are set.
 
 from __future__ import annotations
 
-import os
+from _lib.cli import one_thread
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # one thread: CPU seconds compare
-os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+one_thread()  # one thread: CPU seconds compare
 
 import argparse  # noqa: E402
 import json  # noqa: E402
@@ -46,6 +45,7 @@ import math  # noqa: E402
 from pathlib import Path  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
 
+from _lib.fits import time_to  # noqa: E402
 from fem_ade.plots.render import save_figure  # noqa: E402
 from fem_ade.store.output import write_json_atomic  # noqa: E402
 
@@ -185,16 +185,6 @@ def default_choice(rows: list[dict], order: int, limit: float = 1e-4) -> float |
 # ---------------------------------------------------------------------------------------------
 # stage cost
 # ---------------------------------------------------------------------------------------------
-def time_to(points, target):
-    """studies/cost.py's: the CPU time at which the error first reaches ``target``."""
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from cost import time_to as cost_time_to
-
-    return cost_time_to(points, target)
-
-
 def cost_stage(runs: Runs, plan, compute=True) -> dict:
     case, eps, tol = "prolate v=0.8", plan.cost_eps, TOL["cost"]
     ref = runs.get(case, eps, "axi", plan.reference, TOL["resolution"], compute)

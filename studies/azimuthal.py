@@ -27,14 +27,14 @@ One thread per worker: ``OPENBLAS_NUM_THREADS=1``, ``FEM_ADE_FFT_WORKERS=1`` unl
 
 from __future__ import annotations
 
-import os
+from _lib.cli import one_thread, study_parser
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+one_thread()
 
-import argparse  # noqa: E402
 import json  # noqa: E402
 from pathlib import Path  # noqa: E402
+
+from _lib.fits import extrapolate  # noqa: E402
 
 OUT = Path("runs") / "studies"
 #: the branches: (seed, R₀, from, to); the step in v; the modes
@@ -142,8 +142,6 @@ def summarize(root: Path, eps_list, branches, modes: int = MODES) -> dict:
     """Per branch and ε: its points, where it ended, its folds, its stretches stable in 3D,
     its bifurcations; per (branch, m, k-th of that m) the bifurcations' v at each ε and their
     extrapolation."""
-    from sharp_limit import extrapolate
-
     from fem_ade.campaigns.branch import same_branch
 
     table, curves = [], {}
@@ -293,18 +291,12 @@ def write_report(out: Path, result: dict, suffix: str = "") -> None:
 
 
 def main(argv=None) -> dict:
-    import sys
-
     from fem_ade.campaigns.sweep import listed_sweep, report_rows, run_sweep
     from fem_ade.store.output import write_json_atomic
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=OUT)
+    ap = study_parser(__doc__, OUT, quick="ε = 0.04, short stretches", workers="",
+                      report_only="")
     ap.add_argument("--eps", type=float, nargs="+", help="the ε (default 0.02 0.01 0.005)")
-    ap.add_argument("--quick", action="store_true", help="ε = 0.04, short stretches")
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--report-only", action="store_true")
     args = ap.parse_args(argv)
     suffix = "_quick" if args.quick else ""
     eps_list = tuple(args.eps) if args.eps else (QUICK_EPS if args.quick else EPS)

@@ -25,8 +25,9 @@ from __future__ import annotations
 
 import os
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # one thread: CPU seconds compare
-os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+from _lib.cli import one_thread
+
+one_thread()  # one thread: CPU seconds compare
 
 import argparse  # noqa: E402
 import json  # noqa: E402

@@ -34,13 +34,13 @@ One thread: ``OPENBLAS_NUM_THREADS=1``, ``FEM_ADE_FFT_WORKERS=1`` unless set.
 
 from __future__ import annotations
 
-import os
+from _lib.cli import one_thread, study_parser
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+one_thread()
 
-import argparse  # noqa: E402
 from pathlib import Path  # noqa: E402
+
+from _lib.fits import extrapolate  # noqa: E402
 
 OUT = Path("runs") / "studies"
 SWEEPS = Path(__file__).resolve().parent / "sweeps"
@@ -81,19 +81,12 @@ def line(root: Path, point) -> list[dict]:
 
 
 def main(argv=None) -> dict:
-    import sys
-
     from fem_ade.campaigns.sweep import load_sweep, report_rows, run_sweep
     from fem_ade.store.output import write_json_atomic
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=OUT)
-    ap.add_argument("--quick", action="store_true",
-                    help="short stretches at eps = 0.04: the code, not the result")
-    ap.add_argument("--workers", type=int, default=2, help="Dask workers (a branch each)")
-    ap.add_argument("--report-only", action="store_true",
-                    help="from the branches' folders; follow nothing")
+    ap = study_parser(__doc__, OUT, quick="short stretches at eps = 0.04: the code, not the "
+                      "result", workers="Dask workers (a branch each)",
+                      report_only="from the branches' folders; follow nothing")
     args = ap.parse_args(argv)
     sweep = load_sweep(QUICK_SWEEP if args.quick else SWEEP)
     suffix = "_quick" if args.quick else ""
@@ -121,8 +114,6 @@ def transition(base: Path, pair: dict, eps_list: list, curves: dict) -> dict:
     """One pair's row: its crossing at each ε (:func:`fem_ade.campaigns.branch.crossing`), ε → 0 by
     Richardson with p = 2 over the two smallest ε with one, where each branch ended and its
     folds; its branches' (v, e, unstable) added to ``curves``."""
-    from sharp_limit import extrapolate
-
     from fem_ade.campaigns.branch import crossing, same_branch
 
     upper, lower = pair["branches"]

@@ -49,6 +49,10 @@ After the fix of the exact constraints (commit cbc9968) only the exact variant w
 ``--variants exact`` for both passes, then ``--check``, then ``--clean --report-only``.
 
 The results in studies/results were made with exactly these commands (under ``nice -n 10``).
+
+One long file on purpose: one study's cases (three scenes × four ways of holding V and A)
+through every step they take — the Δt trial, the run, the continuation check, the bulk
+offset, the report's tables — none of which another study uses.
 """
 
 from __future__ import annotations

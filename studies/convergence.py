@@ -41,8 +41,9 @@ from __future__ import annotations
 
 import os
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # one thread: CPU seconds compare
-os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+from _lib.cli import one_thread
+
+one_thread()  # one thread: CPU seconds compare
 
 import argparse  # noqa: E402
 import json  # noqa: E402
@@ -51,6 +52,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from _lib.style import COLOURS  # noqa: E402
 from fem_ade.plots.render import save_figure  # noqa: E402
 
 OUT = Path("runs") / "studies"  # the committed results: --out studies/results
@@ -71,11 +73,6 @@ METHODS = {
 #: the largest node count per axis a discretisation runs at (the iterative path: its cost
 #: is shown, its error is p4's)
 MAX_NODES = {"p4 amg": 64}
-#: one colour per discretisation in every plot
-COLOURS = {"spectral": "#d62728", "p1": "#1f77b4", "p2": "#17becf", "p3": "#9467bd",
-           "p4": "#2ca02c", "p6": "#8c564b", "p8": "#e377c2", "p1 graded": "#aec7e8",
-           "p4 graded": "#98df8a", "p4 amg": "#bcbd22", "p4 centred 0.3": "#ffbb78",
-           "p4 centred 0.5": "#ff7f0e", "p4 centred 0.7": "#d62728"}
 
 FULL = {
     "scenes": {

@@ -24,43 +24,19 @@ is not monotone in the resolution).
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import math
+import subprocess
+import sys
 import time
 from pathlib import Path
 
+from _lib.fits import time_to
+from _lib.style import COLOURS
 from fem_ade.plots.render import save_figure
 
 OUT = Path("runs") / "studies"  # the committed results: --out studies/results
 TARGETS = (1e-2, 1e-3, 1e-4, 1e-5)
-
-
-def _convergence():
-    path = Path(__file__).resolve().parent / "convergence.py"
-    spec = importlib.util.spec_from_file_location("convergence", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def time_to(points: list[tuple[float, float]], target: float) -> float | None:
-    """The time at which a discretisation's error first reaches ``target``, interpolated in
-    log–log between its measured (time, error) points in order of time; None if none does."""
-    pts = sorted(points)
-    best = math.inf
-    prev = None
-    for t, e in pts:
-        e = min(e, best)  # a finer, dearer level is never worse than a cheaper one was
-        if e <= target:
-            if prev is None or prev[1] <= target:
-                return t
-            (t0, e0), (t1, e1) = prev, (t, e)
-            w = (math.log(target) - math.log(e0)) / (math.log(e1) - math.log(e0))
-            return math.exp(math.log(t0) + w * (math.log(t1) - math.log(t0)))
-        best = e
-        prev = (t, e)
-    return None
 
 
 def pareto(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -123,9 +99,10 @@ def main(argv=None) -> dict:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    if args.quick:
-        conv = _convergence()
-        data = conv.main(["--quick", "--parts", "spatial", "--out", str(out)])
+    if args.quick:  # the convergence study's quick spatial part first, as a script
+        subprocess.run([sys.executable, str(Path(__file__).with_name("convergence.py")),
+                        "--quick", "--parts", "spatial", "--out", str(out)], check=True)
+        data = json.loads((out / "convergence_quick.json").read_text())
     else:
         path = Path(args.convergence) if args.convergence else out / "convergence.json"
         if not path.is_file():
@@ -245,13 +222,12 @@ def _axisymmetric_section(out: Path) -> list[str]:
 def _plot(runs, front, title, path) -> None:
     from matplotlib.figure import Figure
 
-    conv = _convergence()
     fig = Figure(figsize=(6.6, 4.8), dpi=110)
     ax = fig.subplots()
     for label in dict.fromkeys(r["label"] for r in runs):
         pts = sorted((r["cpu_s"], max(r["E_err"], 1e-16)) for r in runs if r["label"] == label)
         ax.loglog(*zip(*pts, strict=True), "o-" if "graded" not in label else "s--",
-                  label=label, ms=4, lw=1.4, color=conv.COLOURS.get(label))
+                  label=label, ms=4, lw=1.4, color=COLOURS.get(label))
     pts = [(p["cpu_s"], max(p["E_err"], 1e-16)) for p in front]
     ax.loglog(*zip(*pts, strict=True), color="k", lw=5, alpha=0.18, label="Pareto front")
     for t in TARGETS:

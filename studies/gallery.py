@@ -52,6 +52,10 @@ folder.
     python studies/gallery.py --backend spectral --variants a b
     python studies/gallery.py --report-only                  # table, montages, diagram
     python studies/gallery.py --quick --out /tmp/g           # a smoke run (seconds)
+
+One long file on purpose: it is one study's catalogue of cases (thirteen scenes × the
+variants × two backends) with the plan, archive, verdicts and report that read only that
+catalogue, and none of it is shared with another study.
 """
 
 from __future__ import annotations

@@ -44,6 +44,8 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+from _lib.lines import line_name
+
 OUT = Path("runs") / "studies"
 #: (v, Δa₀ of the grid, branch) of the ADE plane's lines
 CASES = ((0.85, 1.04, "prolate"), (0.8, 0.8, "oblate"), (0.7, 1.64, "prolate"),
@@ -60,11 +62,6 @@ def line_of(lines: Path, v: float, branch: str) -> tuple[Path, dict]:
     """The ADE line of ``branch`` at ``v`` (the pear's: its line up from where it starts):
     its run folder in ``ade_branches.py``'s sweep and its entry in lines.json (what the line
     is, its ``key``, and its archived ``rows``)."""
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from ade_branches import line_name
-
     path = lines / "lines.json"
     archive = json.loads(path.read_text()) if path.is_file() else {}
     for name in (line_name(v, branch), line_name(v, f"{branch}-up")):
@@ -201,13 +198,12 @@ def main(argv=None) -> dict:
     args = _parser().parse_args(argv)
     suffix = "_quick" if args.quick else ""
     lines = args.out / f"ade_branches{suffix}"
-    if args.quick and not lines.is_dir():  # the quick ADE line first (a minute)
+    if args.quick and not lines.is_dir():  # the quick ADE line first (a minute), as a script
+        import subprocess
         import sys
 
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from ade_branches import main as ade_branches
-
-        ade_branches(["--quick", "--out", str(args.out)])
+        subprocess.run([sys.executable, str(Path(__file__).with_name("ade_branches.py")),
+                        "--quick", "--out", str(args.out)], check=True)
     base = args.out / f"nonaxisymmetric{suffix}" / ("" if args.eps is None else
                                                      f"eps={args.eps:g}")
     cases = QUICK_CASES if args.quick else CASES

@@ -16,11 +16,11 @@ montage.png; the run folders under points/ are not committed) and
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 from pathlib import Path
 
+from _lib.cli import study_parser
 from fem_ade.analysis.sharp import BRANCH_OF_LABEL
 from fem_ade.campaigns.sweep import Sweep, load_sweep, read_sweep_table, row, run_sweep
 from fem_ade.plots.sweep_plot import draw
@@ -140,13 +140,10 @@ def _transitions(cells: dict) -> list[str]:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT,
-                    help="default %(default)s; the committed results: studies/results")
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--report-only", action="store_true")
+    ap = study_parser(__doc__, DEFAULT_OUT, first_line=True,
+                      out_help="default %(default)s; the committed results: studies/results",
+                      quick="", workers="", report_only="")
     ap.add_argument("--only", nargs="*", choices=list(SWEEPS), default=list(SWEEPS))
-    ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
     root = args.out / "phase_diagram"
     lines = ["# Phase diagrams from the phase field", "",

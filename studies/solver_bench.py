@@ -16,12 +16,10 @@ m ≤ 8 in ≤ 20 s, at ε = 0.0025 in ≤ 60 s), one thread, and writes
 
 from __future__ import annotations
 
-import os
+from _lib.cli import one_thread, study_parser
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("FEM_ADE_FFT_WORKERS", "1")
+one_thread()
 
-import argparse  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -90,12 +88,10 @@ def measure(folder: Path, old: bool) -> dict:
 def main(argv=None) -> dict:
     from fem_ade.store.output import write_json_atomic
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=OUT)
+    ap = study_parser(__doc__, OUT, quick="ε = 0.04: the code, in seconds")
     ap.add_argument("--small", action="store_true", help="also ε = 0.0025")
     ap.add_argument("--no-old", dest="old", action="store_false",
                     help="without the paths before (MINRES, ARPACK's regular mode)")
-    ap.add_argument("--quick", action="store_true", help="ε = 0.04: the code, in seconds")
     args = ap.parse_args(argv)
     root = args.out / ("solver_bench_quick" if args.quick else "solver_bench")
     result = {}

@@ -19,7 +19,6 @@ what Dask and the driver add to each point. Run with nothing else on the machine
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import shutil
@@ -29,6 +28,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from _lib.cli import study_parser
 from fem_ade.campaigns.sweep import Sweep, run_sweep
 from fem_ade.store.status import Status
 
@@ -108,10 +108,9 @@ def measure(plan, how: str, workers: int, scratch: Path) -> dict:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT,
-                    help="default %(default)s; the committed results: studies/results")
-    ap.add_argument("--quick", action="store_true")
+    ap = study_parser(__doc__, DEFAULT_OUT, first_line=True,
+                      out_help="default %(default)s; the committed results: studies/results",
+                      quick="")
     args = ap.parse_args(argv)
     plan = QUICK if args.quick else FULL
     args.out.mkdir(parents=True, exist_ok=True)

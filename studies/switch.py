@@ -40,11 +40,10 @@ runs and their stability, timed, one after another in one process.
 
 from __future__ import annotations
 
-import os
+from _lib.cli import one_thread, study_parser
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+one_thread(fft=False)
 
-import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import time  # noqa: E402
@@ -251,9 +250,7 @@ def report(result: dict, out: Path, suffix: str) -> None:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=OUT)
-    ap.add_argument("--quick", action="store_true", help="one switch at ε = 0.04 on 32³")
+    ap = study_parser(__doc__, OUT, quick="one switch at ε = 0.04 on 32³")
     args = ap.parse_args(argv)
     suffix = "_quick" if args.quick else ""
     root = args.out / f"switch{suffix}"

@@ -153,3 +153,17 @@ def test_meridian_bad_input(table, match):
     with pytest.raises(ModelError, match=match):
         ic_from_mapping({"kind": "meridian", "centre": [0.5, 0.5, 0.5], "scale": 0.2, **table},
                         3)
+
+
+def test_pear_seed_is_continued_where_sharp_ref_does_not_find_it():
+    """fem_ade.scenes.pear: the sharp pear continued down in m₀ from 1.64 seeds the vesicle
+    scene on the pear branch (up-down asymmetric, said in its description)."""
+    import numpy as np
+
+    from fem_ade.scenes.pear import continued_pear
+
+    scene = continued_pear(0.85, 1.6, 0.04, 0.2)
+    assert scene.shape == "pear" and "by continuation from m0 = 1.64" in scene.description
+    r, z = np.asarray(scene.ic.r), np.asarray(scene.ic.z)
+    widest = z[np.argmax(r)]  # a pear's widest section is off its middle (a prolate's: at it)
+    assert abs(widest) > 0.1 * np.ptp(z), (widest, np.ptp(z))

@@ -7,6 +7,7 @@ study without a check fails here.
 
 from __future__ import annotations
 
+import ast
 import importlib.util
 import json
 import math
@@ -91,10 +92,11 @@ def check_cost(result, out):
     Pareto front is cheaper-and-worse to dearer-and-better; the time to an accuracy agrees
     with the points; p = 4 reaches 1e-4 where p = 1 reaches none of the targets (2D ellipse,
     the quick convergence levels)."""
-    cost = _load(STUDIES / "cost.py")
-    assert cost.time_to([(1.0, 1e-1), (10.0, 1e-3)], 1e-2) == pytest.approx(10**0.5)
-    assert cost.time_to([(1.0, 1e-1), (10.0, 1e-3)], 1e-4) is None
-    assert cost.time_to([(2.0, 1e-1), (1.0, 1e-3)], 1e-2) == 1.0
+    from _lib.fits import time_to
+
+    assert time_to([(1.0, 1e-1), (10.0, 1e-3)], 1e-2) == pytest.approx(10**0.5)
+    assert time_to([(1.0, 1e-1), (10.0, 1e-3)], 1e-4) is None
+    assert time_to([(2.0, 1e-1), (1.0, 1e-3)], 1e-2) == 1.0
     keys = {"scene", "start", "label", "method", "order", "mesh", "n", "nodes", "cpu_s",
             "E_err", "V_err", "A_err", "command"}
     runs = result["runs"]
@@ -609,7 +611,7 @@ def test_committed_results_stay_under_6_mb():
 
 
 def test_ade_plane_runs_each_seed_as_a_point_of_one_sweep(tmp_path, monkeypatch):
-    """The ADE plane's phase-field stage hands its seeded runs to sharp_limit.make_runs (one
+    """The ADE plane's phase-field stage hands its seeded runs to _lib.seeded.make_runs (one
     sweep: each run a point of its own under OUT/ade/sweep) with their ADE, and archives
     each row in runs.json (its quick mode is slow; this plumbing broke once without a
     default-suite test noticing: a call without the folder the runs needed)."""
@@ -634,32 +636,86 @@ def test_ade_plane_runs_each_seed_as_a_point_of_one_sweep(tmp_path, monkeypatch)
 
 
 def test_seeded_runs_are_points_of_one_sweep(tmp_path):
-    """sharp_limit.make_runs: two seeded steady states (the quick prolate at ε = 0.08 on the
+    """_lib.seeded.make_runs: two seeded steady states (the quick prolate at ε = 0.08 on the
     axisymmetric FEM, a second ε) as one sweep, each run in its own point folder, and the
-    rows equal to what the same run made alone gives (sharp_limit.seeded, simulated here);
+    rows equal to what the same run made alone gives (_lib.seeded.seeded, simulated here);
     a second call finds them done and runs nothing."""
     from types import SimpleNamespace
 
+    import _lib.seeded as seeded
+    from _lib.sharp import Cache
     from fem_ade.engine.runs import recipe, simulate
 
-    sharp_limit = _load(STUDIES / "sharp_limit.py")
-    cache = sharp_limit.Cache(tmp_path / "solves.json")
+    cache = Cache(tmp_path / "solves.json")
     sharp = cache.get("prolate", 0.8)
     jobs = [SimpleNamespace(key=f"axisymmetric/prolate@0.8000/{eps:.4f}", sharp=sharp,
                             branch="prolate", eps=eps, backend="axisymmetric", ade={})
             for eps in (0.08, 0.064)]
-    made_runs = sharp_limit.make_runs(tmp_path / "sharp", jobs)
+    made_runs = seeded.make_runs(tmp_path / "sharp", jobs)
     assert [job for job, _ in made_runs] == jobs
     rows = {job.key: row for job, row in made_runs}
     points = tmp_path / "sharp" / "sweep" / "points"
     assert sorted(p.name for p in points.iterdir() if p.is_dir()) == sorted(
-        sharp_limit.point_name(j.key) for j in jobs)
-    made = sharp_limit.seeded(sharp, "prolate", 0.08, "axisymmetric")
+        seeded.point_name(j.key) for j in jobs)
+    made = seeded.seeded(sharp, "prolate", 0.08, "axisymmetric")
     alone = simulate(made.scene, **recipe("steady", made.scene), **made.run)
     assert rows[jobs[0].key]["steps"] == alone.steps
     assert rows[jobs[0].key]["W"] == alone.final["W"]  # bit for bit
-    stamp = (points / sharp_limit.point_name(jobs[0].key) / "summary.json").stat().st_mtime_ns
-    again = sharp_limit.make_runs(tmp_path / "sharp", jobs)
+    stamp = (points / seeded.point_name(jobs[0].key) / "summary.json").stat().st_mtime_ns
+    again = seeded.make_runs(tmp_path / "sharp", jobs)
     assert [r["e"] for _, r in again] == [r["e"] for r in rows.values()]
-    assert (points / sharp_limit.point_name(jobs[0].key) / "summary.json").stat(
+    assert (points / seeded.point_name(jobs[0].key) / "summary.json").stat(
     ).st_mtime_ns == stamp
+
+
+def _reaches_another_study(source: str, studies: set[str]) -> list[str]:
+    """What in a study's (or the library's) source reaches another study: ``sys.path``
+    touched, a module loaded from its file (``spec_from_file_location``), or a study
+    imported by its name (``import X``, ``from X import``, ``import_module("X")``)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Attribute) and node.attr == "path" \
+                and isinstance(node.value, ast.Name) and node.value.id == "sys":
+            found.append(f"{node.lineno}: sys.path")
+        elif isinstance(node, ast.Attribute) and node.attr == "spec_from_file_location" \
+                or isinstance(node, ast.Name) and node.id == "spec_from_file_location":
+            found.append(f"{node.lineno}: spec_from_file_location")
+        elif isinstance(node, ast.Import):
+            found += [f"{node.lineno}: import {a.name}" for a in node.names
+                      if a.name.split(".")[0] in studies]
+        elif isinstance(node, ast.ImportFrom) and not node.level:
+            module = node.module or ""
+            if module.split(".")[0] in studies:
+                found.append(f"{node.lineno}: from {module} import")
+            found += [f"{node.lineno}: from {module} import {a.name}" for a in node.names
+                      if (module, a.name) in (("sys", "path"),
+                                              ("importlib.util", "spec_from_file_location"))]
+        elif isinstance(node, ast.Call) and node.args \
+                and isinstance(node.args[0], ast.Constant) \
+                and getattr(node.func, "attr", getattr(node.func, "id", None)) in (
+                    "import_module", "__import__") \
+                and str(node.args[0].value).split(".")[0] in studies:
+            found.append(f"{node.lineno}: import_module({node.args[0].value!r})")
+    return found
+
+
+def test_no_study_imports_another():
+    """Each study stands on fem_ade and the studies' library (studies/_lib) alone: none
+    touches sys.path, loads a file as a module, or imports another study (they once did, by
+    path, for a cache, a fit or a seed); what they share is in _lib. A leak of each kind,
+    put back in a source, is caught."""
+    studies = {p.stem for p in SCRIPTS}
+    sources = [*SCRIPTS, *sorted((STUDIES / "_lib").glob("*.py"))]
+    found = {p.relative_to(STUDIES).as_posix(): leaks for p in sources
+             if (leaks := _reaches_another_study(p.read_text(), studies))}
+    assert found == {}, found
+    leaks = ("import sys\nsys.path.insert(0, 'studies')\n",
+             "from sys import path\n",
+             "def f():\n    from sharp_limit import make_runs\n",
+             "import ade_plane as plane\n",
+             "import importlib.util\nimportlib.util.spec_from_file_location('c', 'cost.py')\n",
+             "from importlib.util import spec_from_file_location\n",
+             "import importlib\nimportlib.import_module('convergence')\n")
+    for leak in leaks:
+        assert _reaches_another_study(leak, studies), leak
+    assert _reaches_another_study("from _lib.fits import time_to\nimport sys\n", studies) == []
