@@ -15,7 +15,10 @@ from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 
+from fem_ade.backends.base import backend_class, check_backend
+from fem_ade.engine.loop import AdaptiveDt, check_loop_options, option
 from fem_ade.model.params import ModelError, is_int, is_real, max_stable_dt
+from fem_ade.scenes.catalogue import Scene
 
 
 @dataclass(frozen=True)
@@ -60,10 +63,6 @@ class RunConfig:
         scene's Δt and steps), ``adaptive=True`` made concrete (Δt in [Δt/1000, 1000Δt],
         below ε³/κ with the paper's scheme), and every value checked (ModelError, one
         line; TypeError for a value of the wrong kind)."""
-        from fem_ade.backends.base import backend_class
-        from fem_ade.engine.loop import AdaptiveDt
-        from fem_ade.scenes.catalogue import Scene
-
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
         n, steps = (int(x) if isinstance(x, np.integer) else x for x in (n, steps))
@@ -104,9 +103,6 @@ class RunConfig:
         """Everything a run needs of its configuration, before anything is built or
         written: the backend and its options against the scene (resolution, Δt, memory), the
         loop's numbers, the perturbation, momentum without adaptive Δt."""
-        from fem_ade.backends.base import check_backend
-        from fem_ade.engine.loop import AdaptiveDt
-
         if not isinstance(self.backend_options, dict):
             raise ModelError(f"backend_options must be a table, got {self.backend_options!r}")
         if not is_real(self.perturb) or self.perturb < 0:
@@ -116,7 +112,8 @@ class RunConfig:
         check_loop_options(steps=self.steps, until_steady=self.until_steady,
                            max_steps=self.max_steps, every=self.every,
                            checkpoint_every=self.checkpoint_every,
-                           save_every=self.save_every, shape_every=self.shape_every)
+                           save_every=self.save_every, shape_every=self.shape_every,
+                           accelerate=self.accelerate, adaptive=self.adaptive)
         check_backend(self.backend, scene, n=self.n, dt=self.dt, scheme=self.scheme,
                       constraints=self.constraints, allow_underresolved=allow_underresolved,
                       **self.backend_options)
@@ -127,9 +124,6 @@ class RunConfig:
                 AdaptiveDt(**self.adaptive)
             except TypeError as err:
                 raise ModelError(f"adaptive: {err}") from None
-        if self.accelerate and self.adaptive:
-            raise ModelError(f"{option('accelerate')} and {option('adaptive')} do not go "
-                             "together (momentum needs a fixed step map)")
         for name in ("accelerate", "render", "sharp"):
             if not isinstance(getattr(self, name), bool):
                 raise ModelError(f"{name} must be true or false, got {getattr(self, name)!r}")
@@ -181,8 +175,6 @@ def upgraded(data: dict) -> dict:
     data = {**data, "format": RUN_FORMAT}
     options = data.get("backend_options")
     if data.get("backend") == "fem" and isinstance(options, dict) and is_int(data.get("n"), 1):
-        from fem_ade.backends.base import backend_class
-
         order = options.get("order", 1)
         try:
             tensor = backend_class("fem", **options).is_tensor(options.get("mesh"))
@@ -191,27 +183,3 @@ def upgraded(data: dict) -> dict:
         if tensor and is_int(order, 1):
             data["n"] = data["n"] * order
     return data
-
-
-def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_every=None,
-                       save_every=None, shape_every=None) -> None:
-    """The loop's numbers, before anything is written (ModelError, one line)."""
-    if (steps is None) == (until_steady is None):
-        raise ModelError("give exactly one of steps and until_steady")
-    for name, value, low in (("steps", steps, 1), ("max_steps", max_steps, 1),
-                             ("every", every, 1), ("checkpoint_every", checkpoint_every, 1),
-                             ("save_every", save_every, 1), ("shape_every", shape_every, 1)):
-        if value is None:
-            continue
-        if not is_int(value, low):
-            raise ModelError(f"{option(name)} must be an integer >= {low}, got {value!r}")
-    if until_steady is not None and not (is_real(until_steady) and until_steady > 0):
-        raise ModelError(f"{option('until_steady')} must be a positive number, got "
-                         f"{until_steady}")
-
-
-def option(name: str) -> str:
-    """A run option as an error names it: the Python keyword, and the command line's flag
-    beside it (one message for both front ends: ``simulate(max_steps=0)`` and
-    ``--max-steps 0``)."""
-    return f"{name} (--{name.replace('_', '-')})"

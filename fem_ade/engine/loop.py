@@ -61,12 +61,11 @@ import math
 import time
 from dataclasses import dataclass, field
 
-import numpy as np
 from tqdm.auto import tqdm
 
 from fem_ade.backends.base import Backend
 from fem_ade.model.constraints import ConstraintError
-from fem_ade.model.params import HISTORY_COLUMNS, ModelError, diagnose_blowup
+from fem_ade.model.params import HISTORY_COLUMNS, ModelError, diagnose_blowup, is_int, is_real
 from fem_ade.store import interrupt
 from fem_ade.store.status import Status
 
@@ -460,6 +459,37 @@ class Every(Tracker):
 # ---------------------------------------------------------------------------------------
 # the loop
 # ---------------------------------------------------------------------------------------
+def option(name: str) -> str:
+    """A run option as an error names it: the Python keyword, and the command line's flag
+    beside it (one message for both front ends: ``simulate(max_steps=0)`` and
+    ``--max-steps 0``)."""
+    return f"{name} (--{name.replace('_', '-')})"
+
+
+def check_loop_options(*, steps, until_steady, max_steps, every, checkpoint_every=None,
+                       save_every=None, shape_every=None, accelerate=False, adaptive=None,
+                       min_steps: int = 1) -> None:
+    """The loop's numbers and stepping, before anything is built or written (ModelError,
+    one line): the one check of them, by :func:`run_loop` and by
+    :meth:`fem_ade.engine.config.RunConfig.check` (a run's ``steps`` >= 1; the loop also
+    takes 0, a run that only measures its start)."""
+    if (steps is None) == (until_steady is None):
+        raise ModelError("give exactly one of steps and until_steady")
+    for name, value, low in (("steps", steps, min_steps), ("max_steps", max_steps, 1),
+                             ("every", every, 1), ("checkpoint_every", checkpoint_every, 1),
+                             ("save_every", save_every, 1), ("shape_every", shape_every, 1)):
+        if value is None:
+            continue
+        if not is_int(value, low):
+            raise ModelError(f"{option(name)} must be an integer >= {low}, got {value!r}")
+    if until_steady is not None and not (is_real(until_steady) and until_steady > 0):
+        raise ModelError(f"{option('until_steady')} must be a positive number, got "
+                         f"{until_steady}")
+    if accelerate and adaptive:
+        raise ModelError(f"{option('accelerate')} and {option('adaptive')} do not go "
+                         "together (momentum needs a fixed step map)")
+
+
 def run_loop(
     backend: Backend,
     *,
@@ -493,22 +523,15 @@ def run_loop(
     :class:`MomentumStep`) takes each step; everything else — the history, the steady-state
     stop, the progress bar, checkpoints, observers — is a :class:`Tracker`.
     """
-    if (steps is None) == (until_steady is None):
-        raise ModelError("give exactly one of steps and until_steady")
-    if start is None and (isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating))
-                          or not math.isfinite(dt) or dt <= 0):
+    check_loop_options(steps=steps, until_steady=until_steady, max_steps=max_steps,
+                       every=every, checkpoint_every=checkpoint_every, accelerate=accelerate,
+                       adaptive=adaptive, min_steps=0)
+    if start is None and not (is_real(dt) and dt > 0):
         raise ModelError(f"dt must be a positive number, got {dt!r}")
-    if accelerate and adaptive is not None:
-        raise ModelError("accelerate (--accelerate) and adaptive (--adaptive) do not go "
-                         "together (momentum needs a fixed step map)")
-    if every < 1:
-        raise ModelError(f"every (--every) must be >= 1, got {every}")
-    for value in (checkpoint_every, *(k for k, _ in observers)):
-        if value is not None and value < 1:
-            raise ModelError(f"checkpoint and observer intervals must be >= 1, got {value}")
+    for value, _ in observers:
+        if value is not None and not is_int(value, 1):
+            raise ModelError(f"an observer's interval must be an integer >= 1, got {value!r}")
     total = steps if steps is not None else max_steps
-    if total < 0:
-        raise ModelError(f"steps must be >= 0, got {total}")
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     ls = start or LoopState(dt=dt, extra={c: 0 for c in backend.extra_columns})
     backend.set_dt(ls.dt)  # the loop holds Δt
