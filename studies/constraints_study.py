@@ -35,20 +35,21 @@ checkpoint.npz afterwards, so the committed results stay small). ``OUT/constrain
 gets the tables; the hand-written observations in ``OUT/constraints/notes.md`` (if present)
 are included in it verbatim.
 
-    python studies/constraints_study.py                 # until_steady 1e-6 (136 s, 2 cores)
-    python studies/constraints_study.py --long --tol 1e-8 --budget 170   # stricter (~15 min)
-    python studies/constraints_study.py --check --budget 170   # continuation check (~5 min)
-    python studies/constraints_study.py --quick --out /tmp/q   # n = 16, 20 steps, < 30 s
+    python studies/constraints_study.py                 # until_steady 1e-6
+    python studies/constraints_study.py --long --tol 1e-8 --budget 170   # stricter
+    python studies/constraints_study.py --check --budget 170   # continuation check
+    python studies/constraints_study.py --quick --out /tmp/q   # n = 16, 20 steps
     python studies/constraints_study.py --report-only   # rebuild constraints.md from results
     python studies/constraints_study.py --dt-trial --scenes torus --variants exact
-                                        # the Δt trial at every factor (~3 min)
+                                        # the Δt trial at every factor
     python studies/constraints_study.py --clean --report-only   # measure the bulk offset of
                                         # every final.npz still present, then delete them
 
 After the fix of the exact constraints (commit cbc9968) only the exact variant was rerun:
 ``--variants exact`` for both passes, then ``--check``, then ``--clean --report-only``.
 
-The results in studies/results were made with exactly these commands (under ``nice -n 10``).
+The results in studies/results were made with exactly these commands (under ``nice -n 10``);
+what each took is in constraints.md (``--budget`` caps a run's seconds).
 
 One long file on purpose: one study's cases (three scenes × four ways of holding V and A)
 through every step they take — the Δt trial, the run, the continuation check, the bulk
