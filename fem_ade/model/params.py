@@ -7,7 +7,7 @@ reference read a :class:`Params` and switch terms on and off by :attr:`Params.ef
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from numbers import Integral, Real
 
@@ -260,22 +260,26 @@ class Term:
     diagnostics; ``penalty``: a penalty of a constraint (volume, area), whose energy is a
     diagnostic only and whose functional is measured even when the penalty is off (the exact
     constraints hold it; the reduced volume needs it) — a shape term's energy (G) is a history
-    column and a part of the reduced energy e; ``energy_of``: its energy as a function of Q
-    (a :class:`Params` method).
+    column and a part of the reduced energy e; ``energy_method``: the :class:`Params` method
+    that gives its energy from Q (looked up when called, by name).
     """
 
     effect: str
     functional: str
     energy: str
     penalty: bool
-    energy_of: Callable[[Params, float], float]
+    energy_method: str
+
+    def energy_of(self, params: Params, value):
+        """The term's energy at Q = ``value`` (a number, or an array of them)."""
+        return getattr(params, self.energy_method)(value)
 
 
 #: The global terms, in the model's order (the order of their functionals in the history and
 #: of the stabilized scheme's rank-one terms)
-TERMS = (Term("volume", "V", "T1", True, Params.volume_energy),
-         Term("area", "A", "T2", True, Params.area_energy),
-         Term("ade", "dA", "G", False, Params.ade_energy))
+TERMS = (Term("volume", "V", "T1", True, "volume_energy"),
+         Term("area", "A", "T2", True, "area_energy"),
+         Term("ade", "dA", "G", False, "ade_energy"))
 #: the terms by the names of their functional and of their energy
 BY_NAME = {**{t.functional: t for t in TERMS}, **{t.energy: t for t in TERMS}}
 #: the order in which E sums the terms' energies: the shape terms', then the penalties'
