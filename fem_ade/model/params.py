@@ -222,18 +222,13 @@ class Params:
         order, E = W + G + T₁ + T₂."""
         energies = {t.energy: t.energy_of(self, functionals[t.functional])
                     if self.on(t.effect) else 0.0 for t in TERMS}
+        reported = {t.functional: functionals[t.functional]
+                    if t.penalty or self.on(t.effect) else 0.0 for t in TERMS}
         E = W
         for t in ENERGY_ORDER:
             E = E + energies[t.energy]
-        out = {"E": E, "W": W}
-        for name in DIAGNOSTICS[2:]:
-            term = BY_NAME[name]
-            if name == term.energy:
-                out[name] = energies[name]
-            else:
-                out[name] = (functionals[name] if term.penalty or self.on(term.effect)
-                             else 0.0)
-        return out
+        parts = {"E": E, "W": W, **energies, **reported}
+        return {name: parts[name] for name in DIAGNOSTICS}
 
     def reduced_targets(self) -> tuple[float, float]:
         """(v₀, Δa₀): the reduced volume and area difference the targets α, β, ΔA₀ describe."""
@@ -280,8 +275,6 @@ class Term:
 TERMS = (Term("volume", "V", "T1", True, "volume_energy"),
          Term("area", "A", "T2", True, "area_energy"),
          Term("ade", "dA", "G", False, "ade_energy"))
-#: the terms by the names of their functional and of their energy
-BY_NAME = {**{t.functional: t for t in TERMS}, **{t.energy: t for t in TERMS}}
 #: the order in which E sums the terms' energies: the shape terms', then the penalties'
 ENERGY_ORDER = (*(t for t in TERMS if not t.penalty), *(t for t in TERMS if t.penalty))
 #: the energies a history records: E, W and the shape terms' (not the penalties': their
