@@ -113,15 +113,16 @@ def area_difference_gradient(phi, lap, eps, coef):
 
 # --- the global terms, one record each ------------------------------------------------------
 class GlobalTerm:
-    """A term of E_M that depends on φ through one functional Q (the volume and area penalties,
-    the ADE term), as this reference computes it: ``key`` names Q (the name ``Params.energy``
-    reads), ``effect`` switches it on; ``penalty``: Q is measured even when the term is off
-    (the constraints' V and A).
+    """A term of E_M that depends on φ through one functional (V, A or ΔA: the volume and area
+    penalties, the ADE term), as this reference computes it: ``key`` names the functional (the
+    name ``Params.energy`` reads), ``effect`` switches the term on; ``penalty``: its
+    functional is measured even when the term is off (the constraints' V and A).
 
-    ``measure`` gives Q; ``force`` the term's share of Rⁿ at Q as (P, Q, m): P + ΔQ on the
-    grid plus the constant m (the k = 0 mode), None where a part is absent; ``rank_one`` the
-    Hessian's σ g⟨g, ·⟩ for the large-step scheme as (σ, P, Q), g = P + ΔQ, or None where this
-    reference makes the term implicit otherwise (the paper's V: :func:`stabilization_symbol`).
+    ``measure`` gives the functional's value; ``force`` the term's share of Rⁿ at that value
+    as (P, Q, m): P + ΔQ on the grid plus the constant m (the k = 0 mode), None where a part
+    is absent; ``rank_one`` the Hessian's σ g⟨g, ·⟩ for the large-step scheme as (σ, P, Q),
+    g = P + ΔQ, or None where this reference makes the term implicit otherwise (the paper's V:
+    :func:`stabilization_symbol`).
     """
 
     key = effect = ""

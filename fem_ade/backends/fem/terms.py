@@ -50,18 +50,24 @@ class GlobalTerm:
         return self.model.energy_of(p, value)
 
     def measure(self, p: Params, w, phi, Kphi) -> float:
+        """Q at φ (``Kphi``: Kφ)."""
         raise NotImplementedError
 
     def force(self, p: Params, phi, mu, value):
+        """(a, c), ⟨·, v⟩ = K a + W c: T′(Q)⟨δQ/δφ, v⟩ at φ, Q = ``value``; None for a part
+        the term has not."""
         raise NotImplementedError
 
     def force_linear(self, p: Params, phi, mu, v, mu_v, value):
+        """(a′, c′): :meth:`force`'s derivative along (v, μ_v) at fixed ``value``."""
         raise NotImplementedError
 
     def gradient(self, p: Params, K, w, phi, mu, Kphi):
+        """b = ⟨δQ/δφ, v⟩ as a DOF vector (the rank-one term's, the constraints')."""
         raise NotImplementedError
 
     def curvature(self, p: Params) -> float:
+        """σ = T″(Q) (a constant: each term is quadratic in its functional)."""
         raise NotImplementedError
 
 
