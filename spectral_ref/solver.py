@@ -111,13 +111,97 @@ def area_difference_gradient(phi, lap, eps, coef):
     return P, Q
 
 
-def stabilization(p, A, dA, V):
+# --- the global terms, one record each ------------------------------------------------------
+class GlobalTerm:
+    """A term of E_M that depends on φ through one functional (V, A or ΔA: the volume and area
+    penalties, the ADE term), as this reference computes it: ``key`` names the functional (the
+    name ``Params.energy`` reads), ``effect`` switches the term on; ``penalty``: its
+    functional is measured even when the term is off (the constraints' V and A).
+
+    ``measure`` gives the functional's value; ``force`` the term's share of Rⁿ at that value
+    as (P, Q, m): P + ΔQ on the grid plus the constant m (the k = 0 mode), None where a part
+    is absent; ``rank_one`` the Hessian's σ g⟨g, ·⟩ for the large-step scheme as (σ, P, Q),
+    g = P + ΔQ, or None where this reference makes the term implicit otherwise (the paper's V:
+    :func:`stabilization_symbol`).
+    """
+
+    key = effect = ""
+    penalty = False
+
+    def measure(self, phi, lap, p, dV):
+        raise NotImplementedError
+
+    def force(self, phi, lap, p, value):
+        raise NotImplementedError
+
+    def rank_one(self, phi, lap, p):
+        raise NotImplementedError
+
+
+class VolumeTerm(GlobalTerm):
+    """M₁(V − α)²: force 2M₁(V − α)·δV/δφ, a constant (the k = 0 mode) for the paper's V."""
+
+    key, effect, penalty = "V", "volume", True
+
+    def measure(self, phi, lap, p, dV):
+        return volume(phi, dV, p)
+
+    def force(self, phi, lap, p, value):
+        if p.localized_volume:
+            return p.volume_slope(value) * volume_gradient(phi, p), None, None
+        return None, None, 0.5 * p.volume_slope(value)  # slope × ½
+
+    def rank_one(self, phi, lap, p):
+        if not p.localized_volume:
+            return None
+        return p.volume_curvature, volume_gradient(phi, p), None
+
+
+class AreaTerm(GlobalTerm):
+    """M₂(A − β)²: force 2M₂(A − β)·δA/δφ, pointwise."""
+
+    key, effect, penalty = "A", "area", True
+
+    def measure(self, phi, lap, p, dV):
+        return area(phi, lap, p, dV)
+
+    def force(self, phi, lap, p, value):
+        return p.area_slope(value) * area_gradient(phi, lap, p), None, None
+
+    def rank_one(self, phi, lap, p):
+        return p.area_curvature, area_gradient(phi, lap, p), None
+
+
+class AreaDifferenceTerm(GlobalTerm):
+    """G = (κ̄π/(2A₀D²))(ΔA − ΔA₀)²: force γ(…) with γ = ``Params.ade_force_coefficient``."""
+
+    key, effect = "dA", "ade"
+
+    def measure(self, phi, lap, p, dV):
+        return area_difference(phi, lap, p, dV)
+
+    def force(self, phi, lap, p, value):
+        return (*area_difference_gradient(phi, lap, p.eps, p.ade_force_coefficient(value)),
+                None)
+
+    def rank_one(self, phi, lap, p):
+        return (p.ade_modulus, *area_difference_gradient(phi, lap, p.eps, -0.75 * p.D))
+
+
+#: the global terms (volume, area, ADE); the rank-one terms come in this order, the forces
+#: are summed in the reverse one
+TERMS = (VolumeTerm(), AreaTerm(), AreaDifferenceTerm())
+
+
+def stabilization(p, values):
     """(s₀, s₂) of the large-step scheme (model §9): the Lipschitz bounds of the explicit
     terms' linearisations for |φ| ≤ 1 — bending 8κ/ε³ and 6κ/ε; the area penalty's force
     c_A f, c_A = (3√2/2)M₂(A − β): 2|c_A|/ε and |c_A|ε; the ADE force, c_G =
     (3κ̄π/(4A₀D))(ΔA − ΔA₀): 8|c_G|/ε² and 4|c_G|; the localized volume penalty:
-    (3/2)|2M₁(V − α)|. (Written here from the formulas, apart from the FEM's copy, so that the
-    two backends check each other's scheme.)"""
+    (3/2)|2M₁(V − α)|. ``values``: the functionals by key (absent: the term is off).
+    (Written here from the formulas, apart from the FEM's copy, so that the two backends check
+    each other's scheme.)"""
+    A, dA, V = values.get("A"), values.get("dA"), values.get("V")
     s0 = 8.0 * p.kappa / p.eps**3
     s2 = 6.0 * p.kappa / p.eps
     if A is not None:
@@ -258,24 +342,24 @@ class SpectralBackend(BackendBase):
     def step(self) -> dict:
         p, phi, lap, dV = self.params, self.phi, self.lap, self.dV
         P, Q = bending_force_explicit(phi, lap, p)
-        dA = None
-        if p.on("ade"):
-            dA = area_difference(phi, lap, p, dV)
-            Ph, Qh = area_difference_gradient(phi, lap, p.eps, p.ade_force_coefficient(dA))
-            P, Q = P + Ph, Q + Qh
-        A = area(phi, lap, p, dV) if p.on("area") else None
-        if A is not None:
-            P = P + p.area_slope(A) * area_gradient(phi, lap, p)
-        V = volume(phi, dV, p) if p.on("volume") else None
-        if V is not None and p.localized_volume:
-            P = P + p.volume_slope(V) * volume_gradient(phi, p)
+        terms = [t for t in TERMS if p.on(t.effect)]
+        values = {t.key: t.measure(phi, lap, p, dV) for t in terms}
+        mode0 = None
+        for t in reversed(terms):  # ADE, area, volume: the order of the sum (bit for bit)
+            Pt, Qt, mode0_t = t.force(phi, lap, p, values[t.key])
+            if Pt is not None:
+                P = P + Pt
+            if Qt is not None:
+                Q = Q + Qt
+            if mode0_t is not None:
+                mode0 = mode0_t if mode0 is None else mode0 + mode0_t
         R_hat = self._fwd(P) - self.k2 * self._fwd(Q)
-        if V is not None and not p.localized_volume:  # slope × ½, a constant: the k = 0 mode
-            R_hat[(0,) * self.dim] += 0.5 * p.volume_slope(V) * self.n**self.dim
+        if mode0 is not None:  # a constant force: the k = 0 mode
+            R_hat[(0,) * self.dim] += mode0 * self.n**self.dim
         if self.scheme == "paper" and not self.exact:
             self._set_hat((self.phi_hat / self.dt - R_hat) / self.symbol)
             return {}
-        solve = self._step_solver(A, dA, V)
+        solve = self._step_solver(values)
         delta = solve(-R_hat - (self.symbol - 1.0 / self.dt) * self.phi_hat)
         if not self.exact:
             self._set_hat(self.phi_hat + delta)
@@ -322,28 +406,28 @@ class SpectralBackend(BackendBase):
             w[-1] = 1.0
         return self.dV / self.n**self.dim * float(np.sum(w * (np.conj(a_hat) * b_hat).real))
 
-    def _step_solver(self, A, dA, V=None):
+    def _step_solver(self, values):
         """P⁻¹ of this step: δ = φⁿ⁺¹ − φⁿ solves P δ = −Rⁿ − 𝓛φⁿ, 𝓛 = κ(εΔ² + (2/ε)Δ).
 
         The paper's scheme: P = 1/Δt + 𝓛 (diagonal). The large-step scheme (model §9 recipe,
         made concrete): P = 1/Δt + 𝓛 + S + Σᵢ σᵢ gᵢ⟨gᵢ, ·⟩, S the diagonal of
         :func:`stabilization_symbol`, the rank-one terms the Hessians of the penalties: area
         σ = 2M₂ with g = δA/δφ, ADE σ = κ̄π/(A₀D²) with g = δΔA/δφ, the localized volume
-        σ = 2M₁ with g = s′(φ), applied by Woodbury.
+        σ = 2M₁ with g = s′(φ), applied by Woodbury. ``values``: the active terms' functionals
+        by key.
         """
         if self.scheme == "paper":
             return lambda rhs: rhs / self.symbol
         p, phi, lap = self.params, self.phi, self.lap
-        self.stab = ratchet(self.stab, stabilization(p, A, dA, V))
+        self.stab = ratchet(self.stab, stabilization(p, values))
         d = self.symbol + stabilization_symbol(self.k2, p, *self.stab, self.dim)
         low_rank = []
-        if V is not None and p.localized_volume and p.volume_curvature > 0:
-            low_rank.append((p.volume_curvature, self._fwd(volume_gradient(phi, p))))
-        if A is not None and p.area_curvature > 0:
-            low_rank.append((p.area_curvature, self._fwd(area_gradient(phi, lap, p))))
-        if dA is not None and p.ade_modulus > 0:
-            Pg, Qg = area_difference_gradient(phi, lap, p.eps, -0.75 * p.D)
-            low_rank.append((p.ade_modulus, self._fwd(Pg) - self.k2 * self._fwd(Qg)))
+        for t in TERMS:
+            term = t.rank_one(phi, lap, p) if t.key in values else None
+            if term is not None and term[0] > 0:
+                sigma, Pg, Qg = term
+                g = self._fwd(Pg) if Qg is None else self._fwd(Pg) - self.k2 * self._fwd(Qg)
+                low_rank.append((sigma, g))
         if not low_rank:
             return lambda rhs: rhs / d
         z = [g / d for _, g in low_rank]
@@ -361,9 +445,8 @@ class SpectralBackend(BackendBase):
     # -- measurements -----------------------------------------------------------------
     def diagnostics(self) -> dict:
         p, phi, lap, dV = self.params, self.phi, self.lap, self.dV
-        dA = area_difference(phi, lap, p, dV) if p.on("ade") else None
-        return p.energy(bending_energy(phi, lap, p, dV), volume(phi, dV, p),
-                        area(phi, lap, p, dV), dA)
+        values = {t.key: t.measure(phi, lap, p, dV) for t in TERMS if t.penalty or p.on(t.effect)}
+        return p.energy(bending_energy(phi, lap, p, dV), values)
 
     def state(self) -> dict:
         state = {"phi_hat": self.phi_hat, **self.ramp_state()}  # replaced, never mutated

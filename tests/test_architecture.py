@@ -4,6 +4,7 @@ with, consistent directly built backends, parameters that re-derive what they de
 
 import ast
 import inspect
+import re
 from pathlib import Path
 
 import pytest
@@ -337,3 +338,89 @@ def test_functions_are_short_or_say_why():
     assert not new, f"longer than {LONG} lines, not listed with a reason: {new}"
     grown = {k: (v, LONG_FUNCTIONS[k][0]) for k, v in found.items() if v > LONG_FUNCTIONS[k][0]}
     assert not grown, f"grew (now, listed): {grown}"
+
+
+# -- a physics term: one record per backend, and a recipe that lists every file it touches ------
+#: the ADE term's names in code: its scalar parts, its weak forms and spectral functions, its
+#: records, its third implementation (``\b``: ``reduced_area_difference`` is another thing)
+ADE_NAMES = re.compile(r"\b(ade_energy|ade_modulus|ade_force_coefficient|area_difference"
+                       r"(?:_gradient(?:_linear)?)?|AreaDifference(?:Term)?|NaiveADE)\b")
+#: files every term touches that name no code of the ADE term, and why
+UNNAMED = {"docs/model.md": "the maths of every term (§2–§5, §9), without code names",
+           "tests/test_newton.py": "its cases switch the effects on by name, with parameters"}
+RECIPE = "## How to add a physics term, end to end"
+
+
+def _files_naming_the_ade_term(root: Path) -> set[str]:
+    """The repository's source and documentation files (fem_ade, spectral_ref, sharp_ref,
+    tests, the studies' scripts, docs, README.md) that name the ADE term in code, this file
+    aside (it spells the names to look for)."""
+    paths = [*(root / "fem_ade").rglob("*.py"), *(root / "spectral_ref").rglob("*.py"),
+             *(root / "sharp_ref").rglob("*.py"), *(root / "tests").glob("*.py"),
+             *(root / "studies").glob("*.py"), *(root / "docs").glob("*.md"), root / "README.md"]
+    return {str(p.relative_to(root)) for p in paths
+            if p.name != Path(__file__).name and ADE_NAMES.search(p.read_text())}
+
+
+def _recipe_tables(text: str) -> dict[str, list[str]]:
+    """The recipe's tables of files by their ``###`` heading: the backticked path that opens
+    each row."""
+    section = text[text.index(RECIPE) + len(RECIPE):]
+    section = section[:section.find("\n## ")] if "\n## " in section else section
+    tables, heading = {}, None
+    for line in section.splitlines():
+        if line.startswith("### "):
+            heading = line[4:].strip()
+            tables[heading] = []
+        elif heading and (m := re.match(r"\|\s*`([\w./-]+\.\w+)`\s*\|", line)):
+            tables[heading].append(m.group(1))
+    return tables
+
+
+def _recipe_mismatch(listed, found) -> tuple[set[str], set[str]]:
+    """(files a term touches that the recipe misses, files it lists that no term touches)."""
+    return set(found) - set(listed), set(listed) - set(found)
+
+
+def test_the_recipe_lists_every_file_a_term_touches():
+    """docs/architecture.md's recipe lists exactly the files that name the ADE term in code,
+    plus UNNAMED; every file it names (in both of its tables) exists."""
+    root = PACKAGE.parent
+    tables = _recipe_tables((root / "docs" / "architecture.md").read_text())
+    every = tables["Every file a term touches"]
+    assert len(every) == len(set(every)), every
+    found = _files_naming_the_ade_term(root) | set(UNNAMED)
+    missed, extra = _recipe_mismatch(every, found)
+    assert not missed, f"the recipe misses {sorted(missed)}"
+    assert not extra, f"the recipe lists files that name no term: {sorted(extra)}"
+    for path in every + tables["Files some terms touch"]:
+        assert (root / path).is_file(), path
+
+
+def test_a_recipe_that_misses_a_file_fails(tmp_path):
+    """The control: a file dropped from the recipe's list is caught, and so is a file that
+    starts to name the ADE term (the scan sees it)."""
+    root = PACKAGE.parent
+    every = _recipe_tables((root / "docs" / "architecture.md").read_text())[
+        "Every file a term touches"]
+    found = _files_naming_the_ade_term(root) | set(UNNAMED)
+    assert _recipe_mismatch(every[1:], found) == ({every[0]}, set())
+    for sub in ("fem_ade", "spectral_ref", "sharp_ref", "tests", "studies", "docs"):
+        (tmp_path / sub).mkdir()
+    (tmp_path / "README.md").write_text("no term here")
+    (tmp_path / "fem_ade" / "new.py").write_text("G = p.ade_energy(dA)\n")
+    (tmp_path / "fem_ade" / "shape.py").write_text("x = reduced_area_difference(dA, A, D)\n")
+    assert _files_naming_the_ade_term(tmp_path) == {"fem_ade/new.py"}
+
+
+def test_each_backend_has_a_record_of_every_global_term():
+    """The model's TERMS, the FEM's records and the spectral reference's (written apart) name
+    the same terms, in the same order, with the same functionals."""
+    import spectral_ref.solver as spectral
+    from fem_ade.backends.fem.terms import GLOBAL_TERMS
+    from fem_ade.model.params import HISTORY_COLUMNS, TERMS
+
+    model = [(t.effect, t.functional, t.penalty) for t in TERMS]
+    assert [(t.effect, t.functional, t.model.penalty) for t in GLOBAL_TERMS] == model
+    assert [(t.effect, t.key, t.penalty) for t in spectral.TERMS] == model
+    assert HISTORY_COLUMNS == ("step", "t", "E", "W", "G", "V", "A", "dA")

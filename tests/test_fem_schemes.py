@@ -75,8 +75,8 @@ def test_stabilized_low_rank_terms_are_the_penalty_hessians():
     scene = get_scene("discocyte")
     b = FEMBackend(scene, n=12, dt=scene.dt, scheme="stabilized")
     p = scene.params
-    A, dA, V = b.stepper.values(b.phi, b.mu, b.Kphi)
-    terms = b.stepper.rank_one(b.phi, b.mu, b.Kphi, A, dA, V)
+    assert set(b.stepper.values(b.phi, b.mu, b.Kphi)) == {"V", "A", "dA"}
+    terms = b.stepper.rank_one(b.phi, b.mu, b.Kphi)
     assert [s for s, _ in terms] == pytest.approx(
         [2 * p.M1, 2 * p.M2, p.kappa_bar * np.pi / (p.A0 * p.D**2)])
     rng = np.random.default_rng(1)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from functools import lru_cache
 
-from fem_ade.model.params import Params
+from fem_ade.model.params import ENERGY_COLUMNS, Params
 
 #: shape label (fem_ade.analysis.shape.classify) → sharp_ref branch
 BRANCH_OF_LABEL = {"prolate": "prolate", "cylinder": "prolate", "gourd": "prolate",
@@ -36,8 +36,13 @@ def solve_cached(branch: str, v: float, m0: float, kbar: float, c: float):
 
 def reduced_energy(final: dict, kappa: float = 1.0) -> float:
     """e = (W + G) / (16√2πκ/3): a run's bending and ADE energy over a sharp sphere's
-    bending energy in the model's units (the sharp reference's e)."""
-    return (final["W"] + (final.get("G") or 0.0)) / (SPHERE_W * kappa)
+    bending energy in the model's units (the sharp reference's e). W + G: W and the shape
+    terms' energies (:data:`fem_ade.model.params.ENERGY_COLUMNS` after E; not the
+    penalties'), 0 where a record lacks one."""
+    shape = final["W"]
+    for name in ENERGY_COLUMNS[2:]:
+        shape = shape + (final.get(name) or 0.0)
+    return shape / (SPHERE_W * kappa)
 
 
 #: fewer grid points per ε than this and the run's energy is not worth a comparison (its

@@ -64,7 +64,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_ade.backends.threads import limit_threads
-from fem_ade.model.params import ModelError
+from fem_ade.model.params import HISTORY_COLUMNS, ModelError
 from fem_ade.scenes.vesicle import PARAMETERS, get_parameter, set_parameter  # noqa: F401 (the branch's)
 
 #: Newton iterations before a step is taken again at half the arclength; at most this many,
@@ -94,9 +94,10 @@ NEWTON_TOL, DIVERGED = 1e-12, 2.0
 #: the least arclength step, relative to the parameter's size: below it the parameter's
 #: derivative (a central difference) and the predictor's chords are round-off
 MIN_STEP = 1e-6
-COLUMNS = ("point", "e", "E", "W", "G", "V", "A", "dA", "v_surface", "da_surface",
-           "unstable", "lowest_eigenvalue", "label", "fold", "newton", "seconds", "newton_s",
-           "stability_s")
+#: the table's columns: a point's energies and functionals are the history's columns
+#: (:data:`fem_ade.model.params.HISTORY_COLUMNS` after step and t)
+COLUMNS = ("point", "e", *HISTORY_COLUMNS[2:], "v_surface", "da_surface", "unstable",
+           "lowest_eigenvalue", "label", "fold", "newton", "seconds", "newton_s", "stability_s")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -363,7 +364,7 @@ def describe_point(be, name: str, cont: Continuation, newton: int, seconds: floa
     sharp = (shape or {}).get("sharp") or {}
     eigenvalues = np.zeros(0) if stab is None else np.asarray(stab.modes[0])
     row = {name: cont.p, "e": reduced_energy(final, be.params.kappa),
-           **{k: final[k] for k in ("E", "W", "G", "V", "A", "dA")},
+           **{k: final[k] for k in HISTORY_COLUMNS[2:]},
            "v_surface": sharp.get("reduced_volume"),
            "da_surface": sharp.get("reduced_area_difference"),
            "label": (shape or {}).get("label"),

@@ -94,7 +94,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from fem_ade.engine.jobs import failure_record, read_failure, record_failure
-from fem_ade.model.params import ModelError
+from fem_ade.model.params import ENERGY_COLUMNS, ModelError
 from fem_ade.store.output import write_json_atomic
 from fem_ade.store.status import ENDED, Status
 
@@ -111,8 +111,9 @@ RUN_KEYS = {"recipe": str, "backend": str, "n": int, "dt": float, "steps": int,
             "allow_underresolved": bool, "geometry": str, "ic": str, "shape_every": int,
             "sharp": bool}
 #: the table's columns (the axes' names come first, after ``point``; no timings: a resumed
-#: sweep's table is the uninterrupted one's, and each run's times are in its summary.json)
-COLUMNS = ("seed", "status", "steps", "E", "W", "G", "e", "label", "components", "genus",
+#: sweep's table is the uninterrupted one's, and each run's times are in its summary.json);
+#: the energies are the history's (:data:`fem_ade.model.params.ENERGY_COLUMNS`: E, W, G)
+COLUMNS = ("seed", "status", "steps", *ENERGY_COLUMNS, "e", "label", "components", "genus",
            "v_surface", "da_surface", "e_sharp_seed", "sharp_end", "reason")
 
 
@@ -851,8 +852,7 @@ def _row_of_summary(out: dict, s: dict, seed: dict) -> dict:
     f, shape = s.get("final", {}), s.get("shape") or {}
     sharp = shape.get("sharp") or {}
     ref = s.get("sharp_reference") or {}
-    out.update(status=s["status"], steps=s["steps"], E=f.get("E"), W=f.get("W"),
-               G=f.get("G"),
+    out.update(status=s["status"], steps=s["steps"], **{k: f.get(k) for k in ENERGY_COLUMNS},
                e=reduced_energy(f, s["parameters"]["kappa"]) if "W" in f else None,
                label=shape.get("label"), components=shape.get("components"),
                genus=" ".join(str(g) for g in shape.get("genus", [])),
@@ -873,7 +873,7 @@ def _row_of_branch(out: dict, s: dict) -> dict:
                 "reason": "its summary.json's last point was changed after it was saved"}
     out.update(status=s["status"], steps=s["points"], end=s["end"],
                folds=" ".join(str(f) for f in s["folds"]),
-               **{k: last.get(k) for k in ("E", "W", "G", "e", "label", "v_surface",
+               **{k: last.get(k) for k in (*ENERGY_COLUMNS, "e", "label", "v_surface",
                                           "da_surface")})
     return out
 

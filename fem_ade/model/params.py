@@ -7,6 +7,7 @@ reference read a :class:`Params` and switch terms on and off by :attr:`Params.ef
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from numbers import Integral, Real
 
@@ -14,9 +15,6 @@ from fem_ade.registry import CONSTRAINTS, VOLUMES
 
 #: The energy terms a scene can switch on (model §2). ``bending`` is always on.
 EFFECTS = ("bending", "spontaneous_curvature", "ade", "volume", "area")
-
-#: Columns every backend reports, in this order (model §6).
-HISTORY_COLUMNS = ("step", "t", "E", "W", "G", "V", "A", "dA")
 
 SQRT2 = math.sqrt(2.0)
 #: A = AREA_FACTOR * B  (model §2)
@@ -214,13 +212,23 @@ class Params:
         h = γ(−2φΔφ − Δ(φ²) + (1/ε²)(1 − 6φ² + 5φ⁴)), δΔA/δφ being −(3D/4) times the bracket."""
         return -0.75 * self.kappa_bar * math.pi / (self.A0 * self.D) * (dA - self.delta_A0)
 
-    def energy(self, W: float, V: float, A: float, dA: float | None) -> dict:
-        """E_M and its parts from W and the functionals (terms that are off report 0)."""
-        G = self.ade_energy(dA) if self.on("ade") else 0.0
-        T1 = self.volume_energy(V) if self.on("volume") else 0.0
-        T2 = self.area_energy(A) if self.on("area") else 0.0
-        return {"E": W + G + T1 + T2, "W": W, "G": G, "V": V, "A": A,
-                "dA": dA if self.on("ade") else 0.0, "T1": T1, "T2": T2}
+    def energy(self, W: float, functionals: Mapping[str, float | None]) -> dict:
+        """E_M and its parts from W and the functionals a backend measured, by name
+        (:data:`TERMS`: ``{"V": …, "A": …, "dA": …}``). A term that is off reports 0, and so
+        does its functional unless it is a penalty's (V and A are measured always).
+
+        The parts come in the order of :data:`DIAGNOSTICS`: E, W, the shape terms' energies
+        (G), the functionals (V, A, ΔA), the penalties' energies (T1, T2); E sums them in that
+        order, E = W + G + T₁ + T₂."""
+        energies = {t.energy: t.energy_of(self, functionals[t.functional])
+                    if self.on(t.effect) else 0.0 for t in TERMS}
+        reported = {t.functional: functionals[t.functional]
+                    if t.penalty or self.on(t.effect) else 0.0 for t in TERMS}
+        E = W
+        for t in ENERGY_ORDER:
+            E = E + energies[t.energy]
+        parts = {"E": E, "W": W, **energies, **reported}
+        return {name: parts[name] for name in DIAGNOSTICS}
 
     def reduced_targets(self) -> tuple[float, float]:
         """(v₀, Δa₀): the reduced volume and area difference the targets α, β, ΔA₀ describe."""
@@ -234,6 +242,50 @@ class Params:
 
 
 PARAM_FIELDS = {f.name for f in fields(Params)}
+
+
+@dataclass(frozen=True)
+class Term:
+    """One global term of E_M (model §2), the part both backends share: a function of φ through
+    one functional Q, whose value each backend measures on its own fields (the FEM's record:
+    :mod:`fem_ade.backends.fem.terms`; the spectral reference writes its own).
+
+    ``effect``: its effect in :data:`EFFECTS`; ``functional``: the name of Q, its key in the
+    backends' measurements and its history column; ``energy``: the name of its energy in the
+    diagnostics; ``penalty``: a penalty of a constraint (volume, area), whose energy is a
+    diagnostic only and whose functional is measured even when the penalty is off (the exact
+    constraints hold it; the reduced volume needs it) — a shape term's energy (G) is a history
+    column and a part of the reduced energy e; ``energy_method``: the :class:`Params` method
+    that gives its energy from Q (looked up when called, by name).
+    """
+
+    effect: str
+    functional: str
+    energy: str
+    penalty: bool
+    energy_method: str
+
+    def energy_of(self, params: Params, value):
+        """The term's energy at Q = ``value`` (a number, or an array of them)."""
+        return getattr(params, self.energy_method)(value)
+
+
+#: The global terms, in the model's order (the order of their functionals in the history and
+#: of the stabilized scheme's rank-one terms)
+TERMS = (Term("volume", "V", "T1", True, "volume_energy"),
+         Term("area", "A", "T2", True, "area_energy"),
+         Term("ade", "dA", "G", False, "ade_energy"))
+#: the order in which E sums the terms' energies: the shape terms', then the penalties'
+ENERGY_ORDER = (*(t for t in TERMS if not t.penalty), *(t for t in TERMS if t.penalty))
+#: the energies a history records: E, W and the shape terms' (not the penalties': their
+#: functionals are recorded)
+ENERGY_COLUMNS = ("E", "W", *(t.energy for t in TERMS if not t.penalty))
+#: the functionals' columns, in the terms' order
+FUNCTIONAL_COLUMNS = tuple(t.functional for t in TERMS)
+#: Columns every backend reports, in this order (model §6)
+HISTORY_COLUMNS = ("step", "t", *ENERGY_COLUMNS, *FUNCTIONAL_COLUMNS)
+#: the keys of :meth:`Params.energy`: the history's and the penalties' energies
+DIAGNOSTICS = (*ENERGY_COLUMNS, *FUNCTIONAL_COLUMNS, *(t.energy for t in TERMS if t.penalty))
 
 
 def reduced_volume(V: float, A: float) -> float:
@@ -297,8 +349,7 @@ def explicit_area_dt_bound(params: Params, A: float) -> tuple[float, float]:
     return c, bound
 
 
-def stabilization_coefficients(params: Params, A: float | None, dA: float | None,
-                               V: float | None = None):
+def stabilization_coefficients(params: Params, functionals: Mapping[str, float | None]):
     """(s₀, s₂) of the large-step scheme: it adds (s₀ − s₂Δ)(φⁿ⁺¹ − φⁿ) to the left side.
 
     Each explicit term contributes the Lipschitz bound of its linearisation for |φ| ≤ 1:
@@ -312,11 +363,13 @@ def stabilization_coefficients(params: Params, A: float | None, dA: float | None
     * the localized volume penalty 2M₁(V − α)s′(φ): reaction |2M₁(V − α)|·max|s″| =
       (3/2)|2M₁(V − α)| (the paper's V has s″ = 0).
 
-    ``A`` (``dA``, ``V``) is None when the area (ADE, localized volume) effect is off. The
+    ``functionals``: the terms' functionals by name (:data:`TERMS`); A (ΔA, V) is absent or
+    None when the area (ADE, volume) effect is off (V counts only if localized). The
     rank-one parts of the penalty Hessians (volume, area, ADE) are made implicit separately by
     each backend.
     """
     p = params
+    A, dA, V = (functionals.get(name) for name in ("A", "dA", "V"))
     s0 = 8.0 * p.kappa / p.eps**3
     s2 = 6.0 * p.kappa / p.eps
     if A is not None:

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_ade.analysis.shape import Surface, describe, extract_surface, summary_line
-from fem_ade.model.params import Params
+from fem_ade.model.params import ENERGY_COLUMNS, TERMS, Params
 from fem_ade.store.status import Status
 
 ENGINES = ("auto", "vtk", "matplotlib")
@@ -492,11 +492,10 @@ def render_history(history, path: str | Path, params: Params, *,
     xlabel = "t" if physical_time or "step" not in hist else \
         "iteration (momentum: t is not a physical time)"
     alpha, beta, delta_A0 = params.alpha, params.beta, params.delta_A0
-    parts = {"E": hist.get("E"), "W": hist.get("W"), "G": hist.get("G")}
-    if params.on("volume") and "V" in hist:
-        parts["T1"] = params.volume_energy(hist["V"])
-    if params.on("area") and "A" in hist:
-        parts["T2"] = params.area_energy(hist["A"])
+    parts = {name: hist.get(name) for name in ENERGY_COLUMNS}  # E, W, G
+    for term in TERMS:  # the penalties' T1, T2 from their functionals
+        if term.penalty and params.on(term.effect) and term.functional in hist:
+            parts[term.energy] = term.energy_of(params, hist[term.functional])
     labels = {"E": "E$_M$ (total)", "W": "W (bending)", "G": "G (ADE)",
               "T1": "T$_1$ = M$_1$(V−α)²", "T2": "T$_2$ = M$_2$(A−β)²"}
     styles = {"E": ("k", 2.4), "W": ("#c0392b", 1.5), "G": ("#2c7fb8", 1.5),
@@ -508,8 +507,8 @@ def render_history(history, path: str | Path, params: Params, *,
     for name, v in parts.items():
         if v is None or not np.any(v != 0):
             continue
-        colour, lw = styles[name]
-        ax1.plot(t, v, color=colour, lw=lw, label=labels[name],
+        colour, lw = styles.get(name, ("0.4", 1.3))  # a new term: grey, its name
+        ax1.plot(t, v, color=colour, lw=lw, label=labels.get(name, name),
                  marker="o" if len(t) < 15 else None, ms=3)
         shown.append(v[v != 0])
     values = np.concatenate(shown) if shown else np.ones(1)

@@ -6,6 +6,7 @@ hexahedral (quad) meshes.
 - :mod:`.tensor`       the order-p space on a tensor mesh: matrix-free K (sum factorization)
 - :mod:`.assemble`     the space of a run (tensor, or scikit-fem's Q1/Q2 on a mesh file)
 - :mod:`.forms`        every functional and its gradient, once (the weak forms)
+- :mod:`.terms`        the global terms (volume, area, ADE), one record each
 - :mod:`.step`         the schemes: the paper's, the stabilized one, exact constraints
 - :mod:`.solve`        the step's solve: fast diagonalization, or PCG with AMG (pyamg)
 - :mod:`.petsc`        the same step distributed over MPI ranks (PETSc)

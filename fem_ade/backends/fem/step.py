@@ -8,13 +8,14 @@ With μ eliminated by the diagonal GLL mass W (μ = W⁻¹Kφ, the discrete −�
     Ŝ = (1/Δt + s₀)W + (s₂ − 2κ/ε)K + κε K W⁻¹ K + Σᵢ σᵢ bᵢbᵢᵀ,
     ⟨Rⁿ, v⟩ = κ⟨N(φⁿ), v⟩ + ⟨h(φⁿ), v⟩ + M₁(Vⁿ − α)(1, v) − (3√2/2)M₂(Aⁿ − β)⟨f(φⁿ), v⟩,
 
-only the terms whose effect is on being evaluated (:mod:`fem_ade.backends.fem.forms`: ⟨Rⁿ, v⟩ = K a
-+ W c
-from nodal products). The paper's scheme is s₀ = s₂ = 0 and no σ terms — then this is its
+only the terms whose effect is on being evaluated (:mod:`fem_ade.backends.fem.forms`:
+⟨Rⁿ, v⟩ = K a + W c from nodal products). The global terms (volume, area, ADE) are records
+(:mod:`fem_ade.backends.fem.terms`): the step iterates over the active ones, and the
+functionals it measures once per state are a dict by name (``{"V": …, "A": …, "dA": …}``).
+The paper's scheme is s₀ = s₂ = 0 and no σ terms — then this is its
 (φⁿ⁺¹ − φⁿ)/Δt + κ(εΔ² + (2/ε)Δ)φⁿ⁺¹ = −Rⁿ, rearranged. The stabilized scheme takes (s₀, s₂)
 from :func:`fem_ade.model.params.ratchet_stabilization` and the rank-one Hessians σbbᵀ of the
-penalty
-terms (:meth:`MixedStep.rank_one`): volume σ = 2M₁, b = ⟨δV/δφ, v⟩; area σ = 2M₂,
+global terms (:meth:`MixedStep.rank_one`): volume σ = 2M₁, b = ⟨δV/δφ, v⟩; area σ = 2M₂,
 b = ⟨δA/δφ, v⟩; ADE σ = κ̄π/(A₀D²), b = ⟨δΔA/δφ, v⟩ — the exact gradients of the discrete V,
 A, ΔA.
 
@@ -33,6 +34,7 @@ import numpy as np
 
 from fem_ade.backends.fem import forms
 from fem_ade.backends.fem.solve import EXACT, Eigenbasis, StepMatrix, global_dot, make_solver, norm
+from fem_ade.backends.fem.terms import AREA, GLOBAL_TERMS, VOLUME, active_terms
 from fem_ade.model.constraints import solve_multipliers
 from fem_ade.model.params import (
     ModelError,
@@ -53,6 +55,7 @@ class MixedStep:
     def __init__(self, space, params: Params, *, scheme: str, exact: bool, solver: str = "auto",
                  rtol: float | None = None, solver_factory=make_solver):
         self.params = params
+        self.terms = active_terms(params)  # the global terms whose effect is on
         self.scheme, self.exact = scheme, exact
         self.space = space
         self.K, self.w = space.K, space.weights
@@ -102,34 +105,31 @@ class MixedStep:
         stab = None
         if self.scheme == "stabilized":
             stab = self.stab or stabilization_coefficients(self.params,
-                                                           *self.values(phi, mu, Kphi))
+                                                           self.values(phi, mu, Kphi))
         self.solver = self.solver_for(self.dt, stab)
 
     # -- functionals ------------------------------------------------------------------------
-    def values(self, phi, mu, Kphi):
-        """(A, ΔA, V) at φ, None where the effect (area, ade, volume) is off."""
-        p = self.params
-        A = forms.area(phi, Kphi, self.w, p.eps) if p.on("area") else None
-        dA = (forms.area_difference(phi, Kphi, self.w, p.D, p.eps) if p.on("ade") else None)
-        V = forms.volume(phi, self.w, p.localized_volume) if p.on("volume") else None
-        return A, dA, V
+    def values(self, phi, mu, Kphi) -> dict:
+        """The active terms' functionals at φ by name ({"V": …, "A": …, "dA": …}; an effect
+        that is off has no entry)."""
+        p, w = self.params, self.w
+        return {t.functional: t.measure(p, w, phi, Kphi) for t in self.terms}
 
     def diagnostics(self, phi, mu, Kphi) -> dict:
-        """E, W, G, V, A, ΔA (and T1, T2); off terms report 0."""
+        """E, W, G, V, A, ΔA (and T1, T2); off terms report 0 (``Params.energy``). The
+        penalties' V and A are measured even when off; ΔA only when ADE is on."""
         p, w = self.params, self.w
-        dA = forms.area_difference(phi, Kphi, w, p.D, p.eps) if p.on("ade") else None
-        return p.energy(forms.bending(phi, mu, w, p.kappa, p.eps, p.C_eff),
-                        forms.volume(phi, w, p.localized_volume),
-                        forms.area(phi, Kphi, w, p.eps), dA)
+        functionals = {t.functional: t.measure(p, w, phi, Kphi) for t in GLOBAL_TERMS
+                       if t.model.penalty or p.on(t.effect)}
+        return p.energy(forms.bending(phi, mu, w, p.kappa, p.eps, p.C_eff), functionals)
 
     def volume_gradient(self, u) -> np.ndarray:
         """⟨δV/δφ, v⟩ at u: ½W·1, or W s′(u) for the localized V."""
-        return self.w * forms.volume_gradient(u, self.params.localized_volume)
+        return VOLUME.gradient(self.params, self.K, self.w, u, None, None)
 
     def area_gradient(self, u, Ku) -> np.ndarray:
         """⟨δA/δφ, v⟩ at u (the exact gradient of the discrete A)."""
-        s, c = forms.area_gradient(u, self.params.eps)
-        return s * Ku + self.w * c
+        return AREA.gradient(self.params, self.K, self.w, u, None, Ku)
 
     # -- derivatives (Newton's method: fem_ade.backends.fem.newton)
     # ------------------------------------
@@ -148,7 +148,7 @@ class MixedStep:
         a, c = self.hessian_parts(phi, mu, v, mu_v, values)
         Hv = self.K @ (a - (2.0 * p.kappa / p.eps) * v + (p.kappa * p.eps) * mu_v) \
             + self.w * c
-        for sigma, b in self.rank_one(phi, mu, Kphi, *values):
+        for sigma, b in self.rank_one(phi, mu, Kphi):
             Hv = Hv + sigma * global_dot(b, v) * b  # the functionals' slopes
         return Hv
 
@@ -157,21 +157,16 @@ class MixedStep:
         ∇²E_h v = K(a′ − (2κ/ε)v + κε μ_v) + W c′ + the rank-one terms — at φ whose
         :meth:`values` are ``values``. Pointwise and linear in (v, μ_v), so evaluated at
         v = 1, μ_v = 0 and at v = 0, μ_v = 1 they are the coefficients of
-        :meth:`hessian_coefficients`."""
+        :meth:`hessian_coefficients`. The terms are summed in :meth:`explicit_parts`' order."""
         p = self.params
-        A, dA, V = values
         a, c = forms.bending_explicit_linear(phi, mu, v, mu_v, kappa=p.kappa, eps=p.eps,
                                              C=p.C_eff)
-        if dA is not None:
-            a2, c2 = forms.area_difference_gradient_linear(phi, mu, v, mu_v, p.eps,
-                                                           p.ade_force_coefficient(dA))
-            a, c = a + a2, c + c2
-        if A is not None:
-            s, c2 = forms.area_gradient_linear(phi, v, p.eps, p.area_force_scale(A))
-            a, c = a + s * v, c + c2
-        if V is not None:
-            c = c + p.volume_slope(V) * forms.volume_gradient_linear(phi, v,
-                                                                   p.localized_volume)
+        for term in reversed(self.terms):
+            a2, c2 = term.force_linear(p, phi, mu, v, mu_v, values[term.functional])
+            if a2 is not None:
+                a = a + a2
+            if c2 is not None:
+                c = c + c2
         return a, c
 
     def hessian_coefficients(self, phi, mu, Kphi, lam_V: float = 0.0,
@@ -201,7 +196,7 @@ class MixedStep:
             c0 += lam_A * sa
             gamma = gamma + lam_A * ca
         return {"alpha": c2, "gamma": gamma, "c0": c0,
-                "rank_one": self.rank_one(phi, mu, Kphi, *values)}
+                "rank_one": self.rank_one(phi, mu, Kphi)}
 
     def constraint_hessian_vector(self, phi, Kphi, v, lam_V, lam_A) -> np.ndarray:
         """(λ_V ∇²V_h + λ_A ∇²A_h) v: the exact constraints' part of the Lagrangian's
@@ -213,24 +208,26 @@ class MixedStep:
 
     # -- the explicit side ------------------------------------------------------------------
     def explicit_parts(self, phi, mu, Kphi):
-        """(a, c, (A, ΔA, V)) with ⟨Rⁿ, v⟩ = K a + W c: the nodal products of every term."""
+        """(a, c, values) with ⟨Rⁿ, v⟩ = K a + W c: the nodal products of every term, and the
+        functionals measured (:meth:`values`).
+
+        The global terms are added last to first (ADE, area, volume): the order of the sum
+        the scheme has always had, which the floating-point sums (and the histories, bit for
+        bit) depend on."""
         p = self.params
-        A, dA, V = self.values(phi, mu, Kphi)
+        values = self.values(phi, mu, Kphi)
         a, c = forms.bending_explicit(phi, mu, kappa=p.kappa, eps=p.eps, C=p.C_eff)
-        if dA is not None:
-            a2, c2 = forms.area_difference_gradient(phi, mu, p.eps, p.ade_force_coefficient(dA))
-            a += a2
-            c += c2
-        if A is not None:
-            s, c2 = forms.area_gradient(phi, p.eps, p.area_force_scale(A))
-            a += s * phi
-            c += c2
-        if V is not None:  # slope × ⟨δV/δφ, v⟩ = slope × W(½ or s′(φ))
-            c += p.volume_slope(V) * forms.volume_gradient(phi, p.localized_volume)
-        return a, c, (A, dA, V)
+        for term in reversed(self.terms):
+            a2, c2 = term.force(p, phi, mu, values[term.functional])
+            if a2 is not None:
+                a += a2
+            if c2 is not None:
+                c += c2
+        return a, c, values
 
     def explicit_rhs(self, phi, mu, Kphi):
-        """(⟨Rⁿ, v⟩ as a DOF vector, (A, ΔA, V)); only the terms whose effect is on."""
+        """(⟨Rⁿ, v⟩ as a DOF vector, the functionals by name); only the terms whose effect
+        is on."""
         a, c, values = self.explicit_parts(phi, mu, Kphi)
         return self.weak(a, c), values
 
@@ -240,17 +237,15 @@ class MixedStep:
         p = self.params
         return self.K @ ((2.0 * p.kappa / p.eps) * phi - (p.kappa * p.eps) * mu - a) - self.w * c
 
-    def rank_one(self, phi, mu, Kphi, A, dA, V):
-        """[(σ, b)]: the rank-one Hessians of the penalty terms (volume, area, ADE)."""
+    def rank_one(self, phi, mu, Kphi):
+        """[(σ, b)]: the rank-one Hessians σ = T″(Q), b = ⟨δQ/δφ, v⟩ of the active global
+        terms (volume, area, ADE: the model's order) whose σ is positive."""
         p = self.params
         out = []
-        if V is not None and p.volume_curvature > 0:
-            out.append((p.volume_curvature, self.volume_gradient(phi)))
-        if A is not None and p.area_curvature > 0:
-            out.append((p.area_curvature, self.area_gradient(phi, Kphi)))
-        if dA is not None and p.ade_modulus > 0:
-            out.append((p.ade_modulus,
-                        self.weak(*forms.area_difference_gradient(phi, mu, p.eps, -0.75 * p.D))))
+        for term in self.terms:
+            sigma = term.curvature(p)
+            if sigma > 0:
+                out.append((sigma, term.gradient(p, self.K, self.w, phi, mu, Kphi)))
         return out
 
     # -- the step ---------------------------------------------------------------------------
@@ -259,14 +254,14 @@ class MixedStep:
 
         ``krylov_its`` counts the PCG iterations of all the step's solves (0: exact solve).
         """
-        a, c, (A, dA, V) = self.explicit_parts(phi, mu, Kphi)
+        a, c, values = self.explicit_parts(phi, mu, Kphi)
         g = self.descent(phi, mu, a, c)
         low_rank = ()
         if self.scheme == "stabilized":
             self.stab = ratchet_stabilization(self.stab,
-                                              stabilization_coefficients(self.params, A, dA, V))
+                                              stabilization_coefficients(self.params, values))
             self.solver = self.solver_for(self.dt, self.stab)
-            low_rank = self.rank_one(phi, mu, Kphi, A, dA, V)
+            low_rank = self.rank_one(phi, mu, Kphi)
         rhs = [g]
         x0 = [None if phi_prev is None else phi - phi_prev]
         scales = [norm(g)]
@@ -304,7 +299,7 @@ class MixedStep:
             gA = self.area_gradient(u, Ku)
             gV = [global_dot(self.volume_gradient(u), z) for z in zs] if p.localized_volume else JV
             J = np.array([gV, [global_dot(gA, z) for z in zs]])
-            return forms.volume(u, w, p.localized_volume), forms.area(u, Ku, w, p.eps), J
+            return VOLUME.measure(p, w, u, Ku), AREA.measure(p, w, u, Ku), J
 
         a, b, _ = self.ramp.solve(lambda targets: solve_multipliers(measure, *targets))
         return a, b
