@@ -112,45 +112,6 @@ def axisymmetric(be, modes=range(MODES + 1), k: int = EIGENVALUES,
     return out
 
 
-def rigid_motions(be, phi: np.ndarray) -> list[np.ndarray]:
-    """The rigid motions of a 3D state as fields on its nodes: the translations ∂ₐφ and the
-    rotations about the centroid (x − c) × ∇φ, by the spectral elements' derivative."""
-    from fem_ade.backends.fem.tensor import along
-
-    space = be.space
-    Phi = phi.reshape(space.shape)
-    grads = [along(_derivative(ax), Phi, a).ravel() for a, ax in enumerate(space.axes)]
-    X = space.doflocs
-    inside = space.weights * (phi + 1.0)
-    c = [float(np.sum(inside * x) / np.sum(inside)) for x in X]
-    d = [X[a] - c[a] for a in range(3)]
-    rotations = [d[1] * grads[2] - d[2] * grads[1], d[2] * grads[0] - d[0] * grads[2],
-                 d[0] * grads[1] - d[1] * grads[0]]
-    return grads + rotations
-
-
-def _derivative(axis):
-    """d/dx at the nodes of a periodic axis (the mean of the two cells' at a shared node)."""
-    import scipy.sparse as sp
-
-    from fem_ade.backends.fem import gll
-
-    if not getattr(axis, "periodic", False):
-        return axis.derivative
-    p, dofs = axis.order, axis.element_dofs
-    D = gll.derivative_matrix(p)
-    rows, cols, vals = [], [], []
-    for e in range(axis.cells):
-        i, j = np.meshgrid(dofs[e], dofs[e], indexing="ij")
-        rows.append(i.ravel())
-        cols.append(j.ravel())
-        vals.append((D * (2.0 / axis.h[e])).ravel())
-    A = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                      shape=(axis.size, axis.size))
-    shared = np.bincount(dofs.ravel(), minlength=axis.size)
-    return sp.diags(1.0 / shared) @ A
-
-
 def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
               tol: float = 1e-9) -> Stability:
     """The ``k`` lowest eigenvalues of H_L v = λ P v of a 3D FEM state on {Cᵀv = 0}, C the
@@ -162,6 +123,7 @@ def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
 
     from scipy.sparse.linalg import LinearOperator, eigsh
 
+    from fem_ade.backends.fem.modes import p_orthogonal, rigid_motions
     from fem_ade.backends.fem.newton import NewtonSystem, linearize
 
     t0 = time.perf_counter()
@@ -183,7 +145,7 @@ def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
         extra = zero_modes(be.space, lin.phi, 0)
     elif be.space.dim == 3:
         extra = rigid_motions(be, lin.phi)
-    Cs = list(lin.C[:2]) + _p_orthogonal(P, extra)
+    Cs = list(lin.C[:2]) + p_orthogonal(P, extra)
     C = np.column_stack(Cs)
     Y = np.column_stack([sys_.P_inverse(cj) for cj in Cs])
     G = np.linalg.inv(C.T @ Y)
@@ -205,21 +167,6 @@ def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
                                                    else below))))
     out.seconds["all"] = round(time.perf_counter() - t0, 3)
     return out
-
-
-def _p_orthogonal(P, modes: list[np.ndarray], negligible: float = 1e-2) -> list[np.ndarray]:
-    """P·t for each mode t made P-orthogonal to the ones before, a mode whose part beyond
-    them is below ``negligible`` of the largest's P-norm left out."""
-    norms = [math.sqrt(max(float(t @ P(t)), 0.0)) for t in modes]
-    scale = max(norms, default=0.0)
-    kept = []
-    for t in modes:
-        for u in kept:
-            t = t - float(u @ P(t)) * u
-        size = math.sqrt(max(float(t @ P(t)), 0.0))
-        if scale and size > negligible * scale:
-            kept.append(t / size)
-    return [P(u) for u in kept]
 
 
 # ---------------------------------------------------------------------------------------------

@@ -35,11 +35,13 @@ count below σ from the same LU's inertia (Sylvester), with no eigen-solve.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
+from fem_ade.backends.fem.tensor import along
 from fem_ade.model.params import ModelError
 
 #: a zero mode whose P-norm, beyond the modes before it, is below this fraction of the
@@ -277,3 +279,59 @@ def _lanczos(block: ModeBlock, B, shift: float, k: int, which: str, tol: float,
     found = eigsh(H, k=k, M=P, sigma=shift, which=which, OPinv=OPinv, v0=v0, tol=tol,
                   ncv=ncv, return_eigenvectors=vectors)
     return found if vectors else np.asarray(found)
+
+
+# ---------------------------------------------------------------------------------------------
+# the rigid motions of a 3D state
+# ---------------------------------------------------------------------------------------------
+def rigid_motions(be, phi: np.ndarray) -> list[np.ndarray]:
+    """The rigid motions of a 3D state as fields on its nodes: the translations ∂ₐφ and the
+    rotations about the centroid (x − c) × ∇φ, by the spectral elements' derivative."""
+    space = be.space
+    Phi = phi.reshape(space.shape)
+    grads = [along(_derivative(ax), Phi, a).ravel() for a, ax in enumerate(space.axes)]
+    X = space.doflocs
+    inside = space.weights * (phi + 1.0)
+    c = [float(np.sum(inside * x) / np.sum(inside)) for x in X]
+    d = [X[a] - c[a] for a in range(3)]
+    rotations = [d[1] * grads[2] - d[2] * grads[1], d[2] * grads[0] - d[0] * grads[2],
+                 d[0] * grads[1] - d[1] * grads[0]]
+    return grads + rotations
+
+
+def _derivative(axis):
+    """d/dx at the nodes of a periodic axis (the mean of the two cells' at a shared node)."""
+    from fem_ade.backends.fem import gll
+
+    if not getattr(axis, "periodic", False):
+        return axis.derivative
+    p, dofs = axis.order, axis.element_dofs
+    D = gll.derivative_matrix(p)
+    rows, cols, vals = [], [], []
+    for e in range(axis.cells):
+        i, j = np.meshgrid(dofs[e], dofs[e], indexing="ij")
+        rows.append(i.ravel())
+        cols.append(j.ravel())
+        vals.append((D * (2.0 / axis.h[e])).ravel())
+    A = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(axis.size, axis.size))
+    shared = np.bincount(dofs.ravel(), minlength=axis.size)
+    return sp.diags(1.0 / shared) @ A
+
+
+def p_orthogonal(P, modes: list[np.ndarray], negligible: float = 1e-2) -> list[np.ndarray]:
+    """P·t for each mode t made P-orthogonal to the ones before, a mode whose part beyond
+    them is below ``negligible`` of the largest's P-norm left out (a rotation about a
+    state's axis of symmetry): the rigid motions of a 3D state as constraints' gradients,
+    normalized (uᵀPu = 1), for its stability and Newton's pins. (:func:`_independent` is
+    the blocks' own, scaled by the first mode's norm: the two keep the results they made.)"""
+    norms = [math.sqrt(max(float(t @ P(t)), 0.0)) for t in modes]
+    scale = max(norms, default=0.0)
+    kept = []
+    for t in modes:
+        for u in kept:
+            t = t - float(u @ P(t)) * u
+        size = math.sqrt(max(float(t @ P(t)), 0.0))
+        if scale and size > negligible * scale:
+            kept.append(t / size)
+    return [P(u) for u in kept]

@@ -17,7 +17,9 @@ diagonalization. H_L·v is exact: every term's linearization
 (:meth:`fem_ade.backends.fem.step.MixedStep.hessian_vector`, checked against finite differences of
 the gradient to 1e-9). T = Σ wᵢ zᵢ φᵢ pins the translation along z that the energy of an
 axisymmetric run does not see (it would make H_L singular; its multiplier is 0 at a
-solution). The step is halved until E falls by 1e-4 of the Newton decrement, once V and A are
+solution); in 3D the pins are P times the starting state's rigid motions (three
+translations, the rotations that move it), so that a correction neither moves nor turns it.
+The step is halved until E falls by 1e-4 of the Newton decrement, once V and A are
 restored along P⁻¹∇V, P⁻¹∇A; it stops when the decrement |∇Lᵀδφ|/|E| — the energy the next
 step would still gain — is below ``tol``: a steady state by a residual criterion, where the
 gradient flow stops on its energy's change per step.
@@ -157,13 +159,30 @@ class NewtonSystem:
 
     # -- the functionals ---------------------------------------------------------------------
     def _translations(self) -> list[np.ndarray]:
-        """Gradients of the linear functionals that pin the translations: z in the
-        axisymmetric geometry (none elsewhere: a periodic box's translations are left to the
-        Krylov solver, which is started from 0 and sees none of them in the right side)."""
+        """Gradients of the linear functionals that pin the rigid motions (the pins):
+        z in the axisymmetric geometry; in 3D P·u for each rigid motion u of the starting
+        state (the translations ∂ₐφ and the rotations about its centroid, made P-orthogonal
+        and normalized, a rotation about an axis of symmetry left out:
+        :func:`fem_ade.backends.fem.modes.rigid_motions`, :func:`~fem_ade.backends.fem.
+        modes.p_orthogonal`), so that no Newton correction moves or turns the shape. The
+        continuous problem has them as zero modes; the cubic mesh pins them with a small
+        energy of either sign, which left Newton (and a continuation's tangent) to drift
+        along them. None in 2D."""
         if getattr(self.be, "geometry", "cartesian") == "axisymmetric":
             z = self.space.doflocs[1]
             return [self.w * (z - float(np.sum(self.w * z) / np.sum(self.w)))]
-        return []
+        if self.space.dim != 3:
+            return []
+        from fem_ade.backends.fem.modes import p_orthogonal, rigid_motions
+
+        return p_orthogonal(self.P, rigid_motions(self.be, self.be.phi))
+
+    def P(self, x: np.ndarray) -> np.ndarray:
+        """P·x, the bulk Hessian (:meth:`bulk`) applied."""
+        a, c, ke = self.bulk()
+        x = np.ravel(x)
+        Kx = self.space.K @ x
+        return a * self.w * x + c * Kx + ke * (self.space.K @ (Kx / self.w))
 
     def fields(self, phi):
         mu = self.space.laplacian(phi)
