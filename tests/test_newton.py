@@ -185,8 +185,8 @@ def test_a_3d_continuation_step_keeps_the_pins_and_lands_on_a_steady_state():
     """One pseudo-arclength step in v of the tilted prolate in 3D (the axisymmetric
     branches' Continuation on the 3D tensor FEM, its pins among the constraints): v moves
     along the tangent, the new point is steady (Newton from it: at most one iteration, E
-    moved by 7.6e-10, measured) and the pins' values stay (the tangent and the corrections are P-orthogonal to
-    the rigid motions)."""
+    moved by 7.6e-10, measured) and the pins' values stay (the tangent and the corrections
+    are P-orthogonal to the rigid motions)."""
     from fem_ade.campaigns.branch import Continuation
 
     be = _tilted_prolate()
