@@ -30,7 +30,8 @@ from fem_ade.engine.config import RunConfig, option, upgraded
 from fem_ade.engine.loop import AdaptiveDt, LoopState, RunResult, run_loop
 from fem_ade.model.params import HISTORY_COLUMNS, ModelError, is_real
 from fem_ade.scenes.catalogue import Scene, scene_from_mapping, scene_to_mapping
-from fem_ade.scenes.initial import FieldIC, check_grid_field
+from fem_ade.scenes.fields import check_grid_field
+from fem_ade.scenes.initial import FieldIC
 from fem_ade.store.output import (
     HistoryWriter,
     check_history,
