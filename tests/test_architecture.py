@@ -27,7 +27,8 @@ def _imports(path: Path) -> set[str]:
     return out
 
 
-@pytest.mark.parametrize("module", ["engine/loop.py", "engine/runs.py"])
+@pytest.mark.parametrize("module", ["engine/loop.py", "engine/runs.py", "engine/folder.py",
+                                    "engine/execute.py"])
 def test_loop_and_run_folder_know_no_backend(module):
     imports = _imports(PACKAGE / module)
     assert not any(m.startswith(("fem_ade.backends.fem", "spectral_ref")) for m in imports), imports

@@ -316,7 +316,7 @@ def describe_meridians(M: Meridians, *, V=None, A=None, dA=None, D=None) -> dict
 
 def describe_axisymmetric(be, final: dict, grid=None):
     """(shape, (φ revolved on the box's grid, the meridians, the descriptors)) of an
-    axisymmetric backend's final state: what :func:`fem_ade.engine.runs.describe_final` gives for
+    axisymmetric backend's final state: what :func:`fem_ade.engine.execute.describe_final` gives for
     a 3D run, from the (r, z) field (module docstring)."""
     from fem_ade.analysis.shape import SHAPE_KEYS
 

@@ -3,7 +3,7 @@
 A backend knows how to build its state from a scene, take one step of a scheme, and measure
 E, W, G, V, A, ΔA (model §6) on its state. It never writes files and never decides when to
 stop: that is the loop's job (:mod:`fem_ade.engine.loop`), and the run folder is
-:mod:`fem_ade.engine.runs`.
+:mod:`fem_ade.engine.execute`'s.
 The backends are listed in :data:`fem_ade.registry.BACKENDS`.
 """
 
