@@ -216,7 +216,8 @@ class BackendBase:
         the axisymmetric FEM: :mod:`fem_ade.analysis.axishape`). ``final``: the diagnostics, whose
         diffuse V, A, ΔA the reduced values use; ``grid``: :meth:`grid_phi` if the caller
         has it."""
-        from fem_ade.analysis.shape import SHAPE_KEYS, describe, extract_surface
+        from fem_ade.analysis.shape import SHAPE_KEYS, describe
+        from fem_ade.analysis.surface import extract_surface
 
         p = self.scene.params
         grid = np.asarray(self.grid_phi() if grid is None else grid)
