@@ -145,7 +145,7 @@ def command(scene: str, label: str, n: int, steps: int, phi0: str | None = None,
 
 def resample(phi: np.ndarray, m: int) -> np.ndarray:
     """A periodic grid field (n,)*d onto (m,)*d points by its Fourier series."""
-    from fem_ade.scenes.initial import resample_fourier
+    from fem_ade.scenes.fields import resample_fourier
 
     if phi.shape[0] == m:
         return phi

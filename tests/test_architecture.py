@@ -28,7 +28,8 @@ def _imports(path: Path) -> set[str]:
     return out
 
 
-@pytest.mark.parametrize("module", ["engine/loop.py", "engine/runs.py"])
+@pytest.mark.parametrize("module", ["engine/loop.py", "engine/runs.py", "engine/folder.py",
+                                    "engine/execute.py"])
 def test_loop_and_run_folder_know_no_backend(module):
     imports = _imports(PACKAGE / module)
     assert not any(m.startswith(("fem_ade.backends.fem", "spectral_ref")) for m in imports), imports
@@ -424,3 +425,78 @@ def test_each_backend_has_a_record_of_every_global_term():
     assert [(t.effect, t.functional, t.model.penalty) for t in GLOBAL_TERMS] == model
     assert [(t.effect, t.key, t.penalty) for t in spectral.TERMS] == model
     assert HISTORY_COLUMNS == ("step", "t", "E", "W", "G", "V", "A", "dA")
+
+
+#: modules of more than LONG_MODULE lines in fem_ade/, spectral_ref/, sharp_ref/ and studies/
+#: (its _lib and teaching/ too; studies/results holds outputs), each with the one-sentence
+#: reason it is not split, or "split pending" where there is none yet: the list may only
+#: shrink, and a module that is no longer long must leave it (issue 41)
+LONG_MODULE = 600
+LONG_MODULES = {
+    "fem_ade/campaigns/branch.py": "split pending (issue 41): continuation of steady states "
+                                   "(the predictor and Newton's corrector, folds, "
+                                   "bifurcations, a point's stability, branch.json, the "
+                                   "branch table and picture, the command line)",
+    "fem_ade/campaigns/sweep.py": "split pending (issue 41): parameter sweeps on Dask (the "
+                                  "sweep file and its points and branches, the runs on the "
+                                  "workers, the sweep table, the command line)",
+    "fem_ade/plots/render.py": "split pending (issue 41): a run's pictures (the 3D view by "
+                               "VTK or matplotlib, the cross-section, the meridians, the "
+                               "history figure, python -m fem_ade.render)",
+    "fem_ade/engine/loop.py": "split pending (issue 41): the time loop (its steppers and "
+                              "trackers, the check of its options, run_loop), over 600 lines "
+                              "since check_loop_options moved in",
+    "studies/gallery.py": "one study's catalogue of cases (thirteen scenes x the variants x "
+                          "two backends) with the plan, archive, verdicts and report that "
+                          "read only it (its docstring)",
+    "studies/constraints_study.py": "one study's cases (three scenes x four ways of holding V "
+                                    "and A) through every step they take, none of which "
+                                    "another study uses (its docstring)",
+}
+
+
+def _module_lengths(root: Path) -> dict[str, int]:
+    """Each module's lines, by its path from ``root``, in the folders LONG_MODULES covers."""
+    paths = [p for top in ("fem_ade", "spectral_ref", "sharp_ref", "studies")
+             for p in (root / top).rglob("*.py")
+             if not p.relative_to(root).as_posix().startswith("studies/results/")]
+    return {p.relative_to(root).as_posix(): len(p.read_text().splitlines())
+            for p in sorted(paths)}
+
+
+def _long_module_faults(lengths: dict[str, int], listed: dict[str, str]) -> list[str]:
+    """What breaks the rule: a long module not listed, a listed one that is not long (or
+    gone), a reason that is not one sentence."""
+    faults = [f"{m}: {n} lines, not in LONG_MODULES" for m, n in lengths.items()
+              if n > LONG_MODULE and m not in listed]
+    faults += [f"{m}: listed but {lengths.get(m, 'no')} lines: remove it from LONG_MODULES"
+               for m in listed if lengths.get(m, 0) <= LONG_MODULE]
+    faults += [f"{m}: its reason is not one sentence" for m, why in listed.items()
+               if not why or ". " in why.rstrip(".")]
+    return faults
+
+
+def test_modules_are_short_or_say_why():
+    """No module is longer than LONG_MODULE lines unless LONG_MODULES gives its reason, and
+    every module listed there is still that long (so that the list cannot rot)."""
+    assert _long_module_faults(_module_lengths(PACKAGE.parent), LONG_MODULES) == []
+
+
+def test_a_long_module_not_listed_is_caught(tmp_path):
+    """The control: in a tree of its own, an over-long module not listed, a listed one
+    that shrank, and one under studies/results (outputs, not counted)."""
+    for path, lines in {"fem_ade/big.py": LONG_MODULE + 1, "fem_ade/small.py": LONG_MODULE,
+                        "studies/_lib/ok.py": 10,
+                        "studies/results/made.py": 2 * LONG_MODULE}.items():
+        (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / path).write_text("x = 1\n" * lines)
+    lengths = _module_lengths(tmp_path)
+    assert lengths == {"fem_ade/big.py": LONG_MODULE + 1, "fem_ade/small.py": LONG_MODULE,
+                       "studies/_lib/ok.py": 10}
+    faults = _long_module_faults(lengths, {"fem_ade/small.py": "it was long"})
+    assert faults == [f"fem_ade/big.py: {LONG_MODULE + 1} lines, not in LONG_MODULES",
+                      f"fem_ade/small.py: listed but {LONG_MODULE} lines: remove it from "
+                      "LONG_MODULES"], faults
+    assert _long_module_faults({"fem_ade/big.py": LONG_MODULE + 1},
+                               {"fem_ade/big.py": "one. two"}) == [
+        "fem_ade/big.py: its reason is not one sentence"]

@@ -2,7 +2,7 @@
 
 From a resolved start — the spectral state after 20 steps of the 2D teaching ellipse, moved
 onto the FEM's GLL nodes by its own Fourier series
-(:func:`fem_ade.scenes.initial.resample_fourier`),
+(:func:`fem_ade.scenes.fields.resample_fourier`),
 so both start from the same smooth field — the error in E, V, A after 100 steps falls at
 rate 2 for p = 1 and 4 for p = 2 (two-sided), and for p ≥ 4 reaches 1e-8 on the grids where
 p = 1 has 1e-2. From the paper's initial condition (the thin initial interface) the rates are
@@ -15,7 +15,7 @@ import pytest
 
 from fem_ade.backends.fem import FEMBackend
 from fem_ade.scenes.catalogue import get_scene
-from fem_ade.scenes.initial import resample_fourier
+from fem_ade.scenes.fields import resample_fourier
 
 spectral = pytest.importorskip("spectral_ref.solver")
 

@@ -256,16 +256,16 @@ def test_signal_in_the_final_write_waits_for_it(tmp_path, monkeypatch):
     """A signal that arrives while the run's last files are written is held until they are
     whole, then ends the run with exit 130 (it used to end with 0)."""
     from fem_ade.cli.run import main
-    from fem_ade.engine import runs as runs_mod
+    from fem_ade.engine import execute as execute_mod
     from fem_ade.store import interrupt
 
-    finish = runs_mod._finish
+    finish = execute_mod._finish
 
     def finish_with_a_signal(*args, **kwargs):
         interrupt.handler(signal.SIGTERM, None)  # as if TERM came now
         return finish(*args, **kwargs)
 
-    monkeypatch.setattr(runs_mod, "_finish", finish_with_a_signal)
+    monkeypatch.setattr(execute_mod, "_finish", finish_with_a_signal)
     monkeypatch.setattr(signal, "signal", lambda *a: None)  # keep pytest's own handlers
     out = tmp_path / "R"
     code = main([*SHORT, "--steps", "4", "--out", str(out)])

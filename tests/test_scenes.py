@@ -110,7 +110,8 @@ def test_meridian_initial_condition(tmp_path):
     """The ``meridian`` kind is the signed distance to a surface of revolution: a half
     circle gives the sphere's, a closed loop the torus's (to the polyline's chord error), and
     a scene file takes one (as ``python -m sharp_ref ... --json`` prints it)."""
-    from fem_ade.scenes.initial import Meridian, Sphere, Torus, ic_from_mapping
+    from fem_ade.scenes.catalogue import ic_from_mapping
+    from fem_ade.scenes.initial import Meridian, Sphere, Torus
 
     m = 48
     x = np.arange(m) / m
@@ -148,7 +149,7 @@ def test_meridian_initial_condition(tmp_path):
     ({"r": [0.0, 1.0, 1.0, 0.0], "z": [1.0, 0.5, -0.5, "x"]}, "list of numbers"),
 ])
 def test_meridian_bad_input(table, match):
-    from fem_ade.scenes.initial import ic_from_mapping
+    from fem_ade.scenes.catalogue import ic_from_mapping
 
     with pytest.raises(ModelError, match=match):
         ic_from_mapping({"kind": "meridian", "centre": [0.5, 0.5, 0.5], "scale": 0.2, **table},

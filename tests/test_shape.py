@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from fem_ade.analysis.shape import describe, euler_characteristic, extract_surface
+from fem_ade.analysis.shape import describe
+from fem_ade.analysis.surface import euler_characteristic, extract_surface
 
 N, L, EPS = 64, 1.0, 0.025
 C = (0.5, 0.5, 0.5)

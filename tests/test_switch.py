@@ -15,7 +15,7 @@ from fem_ade.campaigns.stability import load_state
 from fem_ade.campaigns.switch import main as switch_main
 from fem_ade.campaigns.switch import start_fields
 from fem_ade.model.params import ModelError
-from fem_ade.scenes.initial import load_meridian_field, meridian_values
+from fem_ade.scenes.fields import load_meridian_field, meridian_values
 
 #: the oblate at ε = 0.04, R₀ = 0.25 down from v = 0.85: its block m = 2 is unstable at the
 #: first four points and crosses zero near v = 0.80 (one m = 2 bifurcation)

@@ -316,7 +316,7 @@ def describe_meridians(M: Meridians, *, V=None, A=None, dA=None, D=None) -> dict
 
 def describe_axisymmetric(be, final: dict, grid=None):
     """(shape, (φ revolved on the box's grid, the meridians, the descriptors)) of an
-    axisymmetric backend's final state: what :func:`fem_ade.engine.runs.describe_final` gives for
+    axisymmetric backend's final state: what :func:`fem_ade.engine.execute.describe_final` gives for
     a 3D run, from the (r, z) field (module docstring)."""
     from fem_ade.analysis.shape import SHAPE_KEYS
 
@@ -339,7 +339,7 @@ def describe_axisymmetric(be, final: dict, grid=None):
 # ---------------------------------------------------------------------------------------------
 class RevolvedSurface:
     """The meridians revolved about z into triangulated surfaces, with the few members of
-    :class:`fem_ade.analysis.shape.Surface` that :mod:`fem_ade.plots.render`'s 3D views use
+    :class:`fem_ade.analysis.surface.Surface` that :mod:`fem_ade.plots.render`'s 3D views use
     (``n_components``, ``component_mesh``, ``outward_normals_at``, ``points``, ``origin``,
     ``L``, ``h``); ``axis`` (x, y) places them in the scene's box."""
 

@@ -3,7 +3,7 @@
 A backend knows how to build its state from a scene, take one step of a scheme, and measure
 E, W, G, V, A, ΔA (model §6) on its state. It never writes files and never decides when to
 stop: that is the loop's job (:mod:`fem_ade.engine.loop`), and the run folder is
-:mod:`fem_ade.engine.runs`.
+:mod:`fem_ade.engine.execute`'s.
 The backends are listed in :data:`fem_ade.registry.BACKENDS`.
 """
 
@@ -216,7 +216,8 @@ class BackendBase:
         the axisymmetric FEM: :mod:`fem_ade.analysis.axishape`). ``final``: the diagnostics, whose
         diffuse V, A, ΔA the reduced values use; ``grid``: :meth:`grid_phi` if the caller
         has it."""
-        from fem_ade.analysis.shape import SHAPE_KEYS, describe, extract_surface
+        from fem_ade.analysis.shape import SHAPE_KEYS, describe
+        from fem_ade.analysis.surface import extract_surface
 
         p = self.scene.params
         grid = np.asarray(self.grid_phi() if grid is None else grid)

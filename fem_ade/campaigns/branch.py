@@ -868,7 +868,7 @@ def _open_folder(out: Path, identity: dict) -> dict:
             raise ModelError(f"{recorded} is not a branch's record ({type(err).__name__}): "
                              "give another --out") from None
         if not same_identity(stored, identity):
-            from fem_ade.engine.runs import identity_difference
+            from fem_ade.engine.folder import identity_difference
 
             why = identity_difference(stored, identity) if isinstance(stored, dict) else None
             why = "" if why is None else " (" + why.replace("in the checkpoint", "there").replace(

@@ -698,7 +698,7 @@ def changed(point: Point, root: Path) -> str | None:
         recorded = json.loads(record.read_text())
     except (OSError, ValueError):
         return "its folder records no parameters (an older fem_ade made it)"
-    from fem_ade.engine.runs import identity_difference
+    from fem_ade.engine.folder import identity_difference
 
     difference = identity_difference(recorded, point.identity())
     return None if difference is None else difference.replace(" in run.json", " now").replace(

@@ -94,7 +94,7 @@ def start_fields(point: str | Path, m: int, delta: float = DELTA,
     from fem_ade.backends.fem.modes import lowest_mode
     from fem_ade.backends.fem.newton import NewtonSystem, linearize
     from fem_ade.campaigns.stability import load_state, read_fields
-    from fem_ade.scenes.initial import meridian_values
+    from fem_ade.scenes.fields import meridian_values
 
     if not (math.isfinite(delta) and 0 < delta <= 1):
         raise ModelError(f"delta is the start's max |δψ|, in (0, 1], got {delta!r}")

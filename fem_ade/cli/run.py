@@ -320,7 +320,8 @@ def _main(argv, scratch: str | None = None) -> int:
 def _resume_main(args, given: set[str], scratch: str | None) -> int:
     """``--resume DIR``: continue the run stored in DIR (only --steps and --quiet may be
     given) and report it; returns the exit code."""
-    from fem_ade.engine.runs import WriteFailed, resume
+    from fem_ade.engine.execute import WriteFailed
+    from fem_ade.engine.runs import resume
     from fem_ade.model.params import ModelError
 
     if args.scene is not None:
@@ -349,7 +350,8 @@ def _resume_main(args, given: set[str], scratch: str | None) -> int:
 def _run_main(args, given: set[str], scratch: str | None) -> int:
     """A new run of ``args.scene`` with the options given and the recipe's for the others
     (``--dry-run``: only checked), and its report; returns the exit code."""
-    from fem_ade.engine.runs import WriteFailed, default_out, simulate
+    from fem_ade.engine.execute import WriteFailed
+    from fem_ade.engine.runs import default_out, simulate
     from fem_ade.model.params import ModelError
 
     try:
@@ -487,7 +489,7 @@ def backend_options(args) -> dict:
 
 
 def _report(scene, backend: str, result, out) -> int:
-    from fem_ade.engine.runs import verdict
+    from fem_ade.engine.execute import verdict
 
     f, p = result.final, scene.params
     line = f"{scene.name} [{backend}]: {result.message}"

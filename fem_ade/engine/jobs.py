@@ -172,13 +172,14 @@ def _holds_another(folder: Path, scene, options, after) -> str:
     """Why an ended folder's run is not the one asked for ('' when it is, or when that
     cannot be told here): its run.json against the run ``simulate(scene, **options)`` would
     make — the scene as run and every choice a resume must match
-    (:func:`fem_ade.engine.runs.run_identity`); with a start field (``after``, ``phi0``) the
+    (:func:`fem_ade.engine.folder.run_identity`); with a start field (``after``, ``phi0``) the
     initial condition is that field's, not compared. A ``make`` job, or a scene or options
     given as functions (made only when a run starts), are the caller's to check: a sweep
     compares each point's NAME.point.json (:func:`fem_ade.campaigns.sweep.changed`)."""
     if scene is None or callable(scene) or callable(options):
         return ""
-    from fem_ade.engine.runs import folder_identity, identity_difference, planned_identity
+    from fem_ade.engine.folder import identity_difference
+    from fem_ade.engine.runs import folder_identity, planned_identity
 
     options = options or {}
     try:

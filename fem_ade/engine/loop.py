@@ -2,7 +2,7 @@
 
 :func:`run_loop` drives any object that implements :class:`fem_ade.backends.base.Backend` and knows
 nothing else about it; the loop alone holds Δt and pushes it to the backend
-(:meth:`~fem_ade.backends.base.Backend.set_dt`). Writing a run folder is :mod:`fem_ade.engine.runs`.
+(:meth:`~fem_ade.backends.base.Backend.set_dt`). A run folder is :mod:`fem_ade.engine.execute`'s.
 
 The loop reads as the scheme's: a *stepper* takes each step and decides what a failed one
 means (:class:`FixedStep`, :class:`AdaptiveStep`, :class:`MomentumStep`); the side concerns
@@ -130,13 +130,13 @@ class RunResult:
     shape: dict | None = None
     shapes: list[dict] = field(default_factory=list)
     restarts: int = 0
-    #: φ on the uniform grid at the end (set by fem_ade.engine.runs for 3D and 2D runs)
+    #: φ on the uniform grid at the end (set by fem_ade.engine.execute for 3D and 2D runs)
     final_grid: object = None
     #: the loop's CPU time (all the process' threads), beside ``wall_s``
     cpu_s: float = 0.0
-    #: the backend's set-up CPU time (set by fem_ade.engine.runs)
+    #: the backend's set-up CPU time (set by fem_ade.engine.execute)
     setup_cpu_s: float = 0.0
-    #: why the shape analysis after the run failed (None: it did not; fem_ade.engine.runs)
+    #: why the shape analysis after the run failed (None: it did not; fem_ade.engine.execute)
     analysis_error: str | None = None
 
     @property

@@ -34,7 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_ade.analysis.shape import Surface, describe, extract_surface, summary_line
+from fem_ade.analysis.shape import describe, summary_line
+from fem_ade.analysis.surface import Surface, extract_surface
 from fem_ade.model.params import ENERGY_COLUMNS, TERMS, Params
 from fem_ade.store.status import Status
 
@@ -221,8 +222,8 @@ def render_shape(phi: np.ndarray, L: float, path: str | Path, *, title: str | No
     does not cross it, the plane through the middle of the largest surface. ``subtitle``:
     text under the title (lines separated by newlines); default: the descriptors' summary.
     ``engine``: "auto", "vtk" or "matplotlib" (module docstring). ``surface``: the
-    :func:`fem_ade.analysis.shape.extract_surface` of ``phi`` if the caller has it (it is moved to
-    display coordinates here). Returns the path written.
+    :func:`fem_ade.analysis.surface.extract_surface` of ``phi`` if the caller has it (it is moved
+    to display coordinates here). Returns the path written.
     """
 
     phi = np.asarray(phi, dtype=float)
@@ -355,8 +356,8 @@ def _two_panels(size, n_lines: int, dpi: int):
 
 def _surface_panel(fig, cell, S, view, engine: str, size, top: float, slice_y: float,
                    translucent: set[int]):
-    """The left panel: the surface S (a :class:`fem_ade.analysis.shape.Surface`, or a revolved one)
-    rendered by VTK (the section at y = ``slice_y`` traced on it) or by matplotlib."""
+    """The left panel: the surface S (a :class:`fem_ade.analysis.surface.Surface`, or a revolved
+    one) rendered by VTK (the section at y = ``slice_y`` traced on it) or by matplotlib."""
     W, H = size
     if engine == "vtk":
         ax3 = fig.add_subplot(cell)

@@ -9,6 +9,9 @@ conditions are functions of position, so that every backend evaluates them on it
 Initial conditions of the paper (model §7): u₀ = tanh((c − q(x)) / (√2 ε)),
 q = (x−x₀)²/a + (y−y₀)²/b + (z−z₀)²/d. The consistent reading of c (the default) makes the
 initial volume match α; the printed one (``ic="printed"``) is kept as a hard case.
+
+Scene files (TOML) are read here, their ``[ic]`` table too (:func:`ic_from_mapping`, into one
+of :mod:`fem_ade.scenes.initial`'s kinds), so that one module says what a scene file may hold.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ import numpy as np
 
 from fem_ade.model.params import EFFECTS, PARAM_FIELDS, ModelError, Params
 from fem_ade.registry import IC_VARIANTS
-from fem_ade.scenes.initial import Ellipsoid, Shape, Sphere, ic_from_mapping
+from fem_ade.scenes.initial import KINDS, Ellipsoid, Shape, Sphere
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -297,6 +300,76 @@ def get_scene(name: str) -> Scene:
 # ---------------------------------------------------------------------------------------
 # Scenes from TOML files
 # ---------------------------------------------------------------------------------------
+def _number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _parse(name: str, kind: str, value):
+    bad = ModelError(f"ic.{name} must be {_WHAT[kind]}, got {value!r}")
+    if kind == "vec":
+        if not (isinstance(value, list) and value and all(_number(v) for v in value)):
+            raise bad
+        return tuple(float(v) for v in value)
+    if kind == "vecs":
+        if not (isinstance(value, list) and value and all(
+                isinstance(v, list) and v and all(_number(x) for x in v) for v in value)):
+            raise bad
+        return tuple(tuple(float(x) for x in v) for v in value)
+    if kind in ("floats+", "floats", "signs"):
+        if not (isinstance(value, list) and value and all(_number(v) for v in value)):
+            raise bad
+        return tuple(int(v) if kind == "signs" else float(v) for v in value)
+    if kind in ("float+", "float"):
+        if not _number(value):
+            raise bad
+        return float(value)
+    if kind == "int+":
+        if not (isinstance(value, int) and not isinstance(value, bool)):
+            raise bad
+        return value
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise bad
+        return value
+    if not isinstance(value, str):
+        raise bad
+    return value
+
+
+_WHAT = {"vec": "a list of numbers", "vecs": "a list of lists of numbers",
+         "floats+": "a list of positive numbers", "floats": "a list of numbers",
+         "signs": "a list of +1 and -1",
+         "float+": "a positive number", "float": "a number", "int+": "a positive integer",
+         "bool": "true or false", "str": "a string"}
+
+
+def ic_from_mapping(table: dict, dim: int) -> Shape:
+    """An initial condition from the ``[ic]`` table of a scene file; ModelError (one line)
+    for an unknown kind, an unknown, missing or ill-typed field, or a value that does not fit."""
+    table = dict(table)
+    kind = table.pop("kind", None)
+    if kind not in KINDS:
+        raise ModelError(f"ic.kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    cls = KINDS[kind]
+    if cls is Ellipsoid and "c" in table:
+        c = table.pop("c")
+        table.setdefault("c_consistent", c)
+        table.setdefault("c_printed", c)
+    spec = dict(cls.spec)
+    unknown = set(table) - set(spec)
+    if unknown:
+        extra = ", c" if cls is Ellipsoid else ""
+        raise ModelError(f"unknown field(s) ic.{', ic.'.join(sorted(unknown))} for kind "
+                         f"{kind!r}; valid: {', '.join(spec)}{extra}")
+    missing = [k for k in spec if k not in table and k not in cls.optional]
+    if missing:
+        raise ModelError(f"ic kind {kind!r} needs {', '.join('ic.' + k for k in missing)}")
+    values = {k: _parse(k, spec[k], v) for k, v in table.items()}
+    ic = cls(**values)
+    ic.check(dim)
+    return ic
+
+
 _SCENE_KEYS = {"name": str, "figure": str, "description": str, "n": int, "dim": int,
                "dt": float, "steps": int, "shape": str}
 

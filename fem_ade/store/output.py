@@ -1,7 +1,7 @@
 """Everything the project writes: history.csv, summary.json, final.npz (and the output folder).
 
-Backends never write files; the run folder (:mod:`fem_ade.engine.runs`) hands rows and fields to the
-writers here.
+Backends never write files; the run folder (:mod:`fem_ade.engine.execute`) hands rows and fields to
+the writers here.
 """
 
 from __future__ import annotations
