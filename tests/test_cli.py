@@ -173,3 +173,25 @@ def test_progress_toward_a_steady_state_tells_the_truth(cli, tmp_path):
     assert not any("/20000" in f for f in frames)
     summary = json.loads((out / "summary.json").read_text())
     assert "iterations (momentum)" in run_label(summary, 16)
+
+
+def test_plan_says_what_simulate_would_run(tmp_path):
+    """The Python API's dry run: plan() takes simulate's keywords, checks them as simulate
+    does, writes nothing and returns the CLI's line; simulate itself always runs (it returns
+    a RunResult, never the line)."""
+    import inspect
+
+    import pytest
+
+    from fem_ade.engine.runs import plan, simulate
+    from fem_ade.model.params import ModelError
+
+    out = tmp_path / "never"
+    line = plan("sphere", backend="spectral", n=32, steps=3, out=out)
+    assert line.startswith("sphere with the spectral backend") and "3 steps" in line
+    assert line.endswith(f"into {out}") and not out.exists()
+    with pytest.raises(ModelError, match="n must be"):
+        plan("sphere", backend="spectral", n=4)
+    with pytest.raises(TypeError, match="dry_run"):
+        plan("sphere", dry_run=True)
+    assert "dry_run" not in inspect.signature(simulate).parameters

@@ -351,7 +351,7 @@ def _run_main(args, given: set[str], scratch: str | None) -> int:
     """A new run of ``args.scene`` with the options given and the recipe's for the others
     (``--dry-run``: only checked), and its report; returns the exit code."""
     from fem_ade.engine.execute import WriteFailed
-    from fem_ade.engine.runs import default_out, simulate
+    from fem_ade.engine.runs import default_out, plan, simulate
     from fem_ade.model.params import ModelError
 
     try:
@@ -365,15 +365,16 @@ def _run_main(args, given: set[str], scratch: str | None) -> int:
         if scratch is not None:  # an MPI rank > 0: the same run, written to its own folder
             out, args.out, args.force, args.quiet, args.no_render = scratch, scratch, True, \
                 True, True
-        result = simulate(scene, config=_run_config(args, scene, options), phi0=args.phi0,
-                          out=out, force=args.force, fresh=not args.out, quiet=args.quiet,
-                          allow_underresolved=args.allow_underresolved, dry_run=args.dry_run)
+        run = dict(config=_run_config(args, scene, options), phi0=args.phi0, out=out,
+                   force=args.force, allow_underresolved=args.allow_underresolved)
+        if args.dry_run:
+            line = plan(scene, **run)
+            return _printed(lambda: print(f"fem_ade.run: would run {line}"), 0)
+        result = simulate(scene, **run, fresh=not args.out, quiet=args.quiet)
     except ModelError as err:
         return _error(str(err))
     except WriteFailed as err:
         return _failed(str(err))
-    if args.dry_run:
-        return _printed(lambda: print(f"fem_ade.run: would run {result}"), 0)
     return _printed(lambda: _report(scene, args.backend, result, out))
 
 

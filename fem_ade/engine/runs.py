@@ -19,7 +19,9 @@ written while and after the loop runs.
 
 from __future__ import annotations
 
+import inspect
 import time
+from dataclasses import fields as dataclass_fields
 from pathlib import Path
 
 import numpy as np
@@ -87,10 +89,9 @@ def simulate(
     quiet: bool = True,
     allow_underresolved: bool = False,
     backend_options: dict | None = None,
-    dry_run: bool = False,
     fresh: bool = False,
     config: RunConfig | None = None,
-) -> RunResult | str:
+) -> RunResult:
     """Run ``scene`` with ``backend`` and, if ``out`` is given, write its run folder there.
 
     ``phi0``: start from this field instead of the scene's initial condition: an array on a
@@ -115,46 +116,10 @@ def simulate(
     created): the numbers, the scene, the backend's options, the output folder, and the
     initial field (finite, with an inside and an outside). Then the folder is made
     (``fresh``: a new folder, as the CLI's default) and locked, and, with ``force``, the
-    previous run's files in it are removed. ``dry_run``: check, then return a one-line
-    description instead of running.
+    previous run's files in it are removed. :func:`plan` checks the same and says what
+    would run.
     """
-    scene = _scene_argument(scene)
-    if config is not None:
-        if not isinstance(config, RunConfig):
-            raise TypeError(f"config must be a fem_ade.engine.config.RunConfig, got "
-                            f"{type(config).__name__}")
-        given = _run_keywords_given(locals())
-        if given:
-            raise ModelError(f"give config or the run's keywords, not both: {', '.join(given)} "
-                             "would be ignored (config.with_(...) changes a configuration)")
-    if monitor is not None and not callable(monitor):
-        raise TypeError(f"monitor must be callable (backend, row), got "
-                        f"{type(monitor).__name__}")
-    if config is None:
-        if not is_real(perturb):  # None included: perturb has no "not given"
-            raise ModelError(f"{option('perturb')} must be a number >= 0, got {perturb!r}")
-        config = RunConfig.build(
-            scene, backend=backend, n=n, dt=dt, steps=steps, until_steady=until_steady,
-            max_steps=max_steps, every=every, ic=ic, perturb=perturb, seed=seed, scheme=scheme,
-            constraints=constraints, adaptive=adaptive, accelerate=accelerate,
-            checkpoint_every=checkpoint_every, save_every=save_every, shape_every=shape_every,
-            render=render, sharp=sharp, backend_options=backend_options)
-    scene, initial = _start_field(scene, phi0)
-    config.check(scene, allow_underresolved=allow_underresolved)
-    scene = scene_as_run(scene, config)
-    out = check_out_dir(out, force=force) if out is not None else None
-    be = build_backend(scene, config)  # checks the initial field, writes nothing
-    if dry_run:
-        info = be.info()
-        grid = info.get("resolution", f"n = {config.n}")
-        return (f"{scene.name} with the {config.backend} backend ({grid}, "
-                f"{config.scheme} scheme, {config.constraints} constraints, "
-                f"dt = {config.dt:g}, "
-                + (f"{config.steps} steps" if config.steps is not None else
-                   f"until steady (tol {config.until_steady:g}, at most {config.max_steps} "
-                   "steps)")
-                + (", momentum" if config.accelerate else "") + ")"
-                + (f" into {out}" if out is not None else ""))
+    scene, config, initial, out, be = _prepare(locals())
     if out is None:
         return execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)
     lock = prepare_out_dir(out, force=force, fresh=fresh)  # ours until the run ends
@@ -166,6 +131,56 @@ def simulate(
         return execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)
     finally:
         lock.release()
+
+
+def plan(scene, **options) -> str:
+    """What ``simulate(scene, **options)`` would run, in one line — every input checked as
+    :func:`simulate` checks it (ModelError, TypeError), the backend built, nothing written
+    (``python -m fem_ade.run --dry-run``)."""
+    defaults = {k: p.default for k, p in inspect.signature(simulate).parameters.items()}
+    unknown = sorted((set(options) - set(defaults)) | ({"scene"} & set(options)))
+    if unknown:
+        raise TypeError(f"plan() takes simulate's keywords; not {', '.join(unknown)}")
+    scene, config, _, out, be = _prepare({**defaults, **options, "scene": scene})
+    grid = be.info().get("resolution", f"n = {config.n}")
+    return (f"{scene.name} with the {config.backend} backend ({grid}, "
+            f"{config.scheme} scheme, {config.constraints} constraints, "
+            f"dt = {config.dt:g}, "
+            + (f"{config.steps} steps" if config.steps is not None else
+               f"until steady (tol {config.until_steady:g}, at most {config.max_steps} "
+               "steps)")
+            + (", momentum" if config.accelerate else "") + ")"
+            + (f" into {out}" if out is not None else ""))
+
+
+def _prepare(values: dict):
+    """(scene as run, configuration, the start field to keep, the output folder, the
+    backend) of a :func:`simulate` call's keyword ``values``: everything checked (ModelError,
+    TypeError), nothing written."""
+    scene, config, monitor = _scene_argument(values["scene"]), values["config"], values["monitor"]
+    if config is not None:
+        if not isinstance(config, RunConfig):
+            raise TypeError(f"config must be a fem_ade.engine.config.RunConfig, got "
+                            f"{type(config).__name__}")
+        given = _run_keywords_given(values)
+        if given:
+            raise ModelError(f"give config or the run's keywords, not both: {', '.join(given)} "
+                             "would be ignored (config.with_(...) changes a configuration)")
+    if monitor is not None and not callable(monitor):
+        raise TypeError(f"monitor must be callable (backend, row), got "
+                        f"{type(monitor).__name__}")
+    if config is None:
+        if not is_real(values["perturb"]):  # None included: perturb has no "not given"
+            raise ModelError(f"{option('perturb')} must be a number >= 0, got "
+                             f"{values['perturb']!r}")
+        config = RunConfig.build(scene, **{k: values[k] for k in _RUN_KEYWORDS})
+    scene, initial = _start_field(scene, values["phi0"])
+    config.check(scene, allow_underresolved=values["allow_underresolved"])
+    scene = scene_as_run(scene, config)
+    out = values["out"]
+    out = check_out_dir(out, force=values["force"]) if out is not None else None
+    be = build_backend(scene, config)  # checks the initial field, writes nothing
+    return scene, config, initial, out, be
 
 
 def _start_field(scene, phi0) -> tuple:
@@ -189,17 +204,13 @@ def _start_field(scene, phi0) -> tuple:
     return scene, initial
 
 
-#: simulate's keywords that a RunConfig holds (with ``config=``, none may be given)
-_RUN_KEYWORDS = ("backend", "n", "dt", "steps", "until_steady", "max_steps", "every", "ic",
-                 "perturb", "seed", "scheme", "constraints", "adaptive", "accelerate",
-                 "checkpoint_every", "save_every", "shape_every", "render", "sharp",
-                 "backend_options")
+#: simulate's keywords that a RunConfig holds, its fields (with ``config=``, none may be
+#: given)
+_RUN_KEYWORDS = tuple(f.name for f in dataclass_fields(RunConfig))
 
 
 def _run_keywords_given(values: dict) -> list[str]:
     """The run keywords of a simulate call that differ from their defaults."""
-    import inspect
-
     defaults = {k: p.default for k, p in inspect.signature(simulate).parameters.items()}
     return [k for k in _RUN_KEYWORDS if values[k] is not defaults[k]
             and values[k] != defaults[k]]
