@@ -108,7 +108,7 @@ def plan(eps_list, branches, step: float = STEP, modes: int = MODES,
 
 def rows_of(root: Path, name: str) -> tuple[list[dict], list[dict]]:
     """A finished branch's rows (branch.csv) and bifurcations, or ([], [])."""
-    from fem_ade.campaigns.branch import read_branch_table
+    from fem_ade.campaigns.branch_folder import read_branch_table
     from fem_ade.engine.jobs import read_summary
     from fem_ade.store.status import Status
 
@@ -142,7 +142,7 @@ def summarize(root: Path, eps_list, branches, modes: int = MODES) -> dict:
     """Per branch and ε: its points, where it ended, its folds, its stretches stable in 3D,
     its bifurcations; per (branch, m, k-th of that m) the bifurcations' v at each ε and their
     extrapolation."""
-    from fem_ade.campaigns.branch import same_branch
+    from fem_ade.campaigns.branch_analysis import same_branch
 
     table, curves = [], {}
     for seed, R0, start, stop, eps, n in runs_of(eps_list, branches):

@@ -97,7 +97,7 @@ def revolved(line: Path, entry: dict, row: dict, phi, nodes, eps: float | None =
     from fem_ade.analysis.axishape import meridians
     from fem_ade.backends.base import make_backend
     from fem_ade.campaigns.branch import set_parameter
-    from fem_ade.campaigns.identity import read_identity
+    from fem_ade.campaigns.branch_folder import read_identity
     from fem_ade.model.params import ModelError
     from fem_ade.scenes.catalogue import vesicle_scene
     from fem_ade.scenes.initial import Meridian

@@ -864,7 +864,7 @@ def _row_of_summary(out: dict, s: dict, seed: dict) -> dict:
 
 
 def _row_of_branch(out: dict, s: dict) -> dict:
-    from fem_ade.campaigns.branch import row_digest
+    from fem_ade.campaigns.branch_folder import row_digest
 
     last = s["last"]
     record = last.get("integrity")
