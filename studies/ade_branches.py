@@ -173,7 +173,8 @@ def run_lines(base: Path, keys: list[dict], archive: dict, workers: int) -> None
     sweep in ``base/sweep`` (:mod:`fem_ade.campaigns.sweep`: a Dask task per line, resumable, a
     failure recorded with its reason), and archive each line's outcome in
     ``base/lines.json`` as soon as the sweep has ended (:func:`archive_line`)."""
-    from fem_ade.campaigns.sweep import listed_sweep, run_sweep
+    from fem_ade.campaigns.sweep import run_sweep
+    from fem_ade.campaigns.sweep_file import listed_sweep
     from fem_ade.model.params import ModelError
     from fem_ade.store.output import write_json_atomic
 

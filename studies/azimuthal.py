@@ -291,7 +291,8 @@ def write_report(out: Path, result: dict, suffix: str = "") -> None:
 
 
 def main(argv=None) -> dict:
-    from fem_ade.campaigns.sweep import listed_sweep, report_rows, run_sweep
+    from fem_ade.campaigns.sweep import report_rows, run_sweep
+    from fem_ade.campaigns.sweep_file import listed_sweep
     from fem_ade.store.output import write_json_atomic
 
     ap = study_parser(__doc__, OUT, quick="ε = 0.04, short stretches", workers="",

@@ -82,7 +82,8 @@ def line(root: Path, point) -> list[dict]:
 
 
 def main(argv=None) -> dict:
-    from fem_ade.campaigns.sweep import load_sweep, report_rows, run_sweep
+    from fem_ade.campaigns.sweep import report_rows, run_sweep
+    from fem_ade.campaigns.sweep_file import load_sweep
     from fem_ade.store.output import write_json_atomic
 
     ap = study_parser(__doc__, OUT, quick="short stretches at eps = 0.04: the code, not the "

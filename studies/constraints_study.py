@@ -361,7 +361,8 @@ def run_points(specs: list[dict], root: Path, workers: int) -> None:
     """The pass's production runs as one sweep of listed points in ``root``
     (:mod:`fem_ade.campaigns.sweep`: ``root/points/NAME``, on ``workers`` Dask processes, resumable,
     a failure recorded with its reason)."""
-    from fem_ade.campaigns.sweep import listed_sweep, run_sweep
+    from fem_ade.campaigns.sweep import run_sweep
+    from fem_ade.campaigns.sweep_file import listed_sweep
 
     run_sweep(listed_sweep(root.parent.name, specs), root, workers=workers, quiet=True)
 

@@ -40,7 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_ade.campaigns.sweep import Sweep, load_sweep, run_sweep
+from fem_ade.campaigns.sweep import run_sweep
+from fem_ade.campaigns.sweep_file import Sweep, load_sweep
 from fem_ade.store.output import write_json_atomic
 
 HERE = Path(__file__).resolve().parent

@@ -201,8 +201,9 @@ def kick_spec(spec: dict) -> dict:
 
 
 def as_sweep(specs: list[dict]):
-    """The listed points as one sweep, checked (:func:`fem_ade.campaigns.sweep.check_sweep`)."""
-    from fem_ade.campaigns.sweep import listed_sweep
+    """The listed points as one sweep, checked
+    (:func:`fem_ade.campaigns.sweep_file.check_sweep`)."""
+    from fem_ade.campaigns.sweep_file import listed_sweep
 
     return listed_sweep("gallery", specs, base=specs[0]["base"])
 

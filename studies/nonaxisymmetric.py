@@ -159,7 +159,8 @@ def point_spec(name: str, kind: str, scene, n: int) -> dict:
 def run_all(specs: list[dict], base: Path) -> None:
     """The cases' runs as one sweep on two Dask workers (a control beside its kicked run):
     resumable, each run once, a failure recorded with its reason."""
-    from fem_ade.campaigns.sweep import listed_sweep, run_sweep
+    from fem_ade.campaigns.sweep import run_sweep
+    from fem_ade.campaigns.sweep_file import listed_sweep
 
     run_sweep(listed_sweep("nonaxisymmetric", specs), base / "sweep", workers=2, quiet=True)
 

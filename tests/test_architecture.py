@@ -307,7 +307,7 @@ LONG_FUNCTIONS = {
     "fem_ade/engine/loop.py:run_loop": (103, "the loop: one place where a step's outcome "
                                              "(accept, retry, diverge, stop, interrupt)"),
     "fem_ade/cli/run.py:build_parser": (96, "argparse: one option per statement"),
-    "fem_ade/campaigns/sweep.py:load_sweep": (65, "each mistake in a sweep file: its error"),
+    "fem_ade/campaigns/sweep_file.py:load_sweep": (65, "each mistake in a sweep file: its error"),
     "fem_ade/scenes/catalogue.py:scene_from_mapping": (72, "each mistake in a TOML scene"),
     "studies/_lib/limit_eps.py:eps_figures": (68, "a matplotlib figure, panel by panel"),
     "fem_ade/plots/render.py:render_history": (68, "a matplotlib figure, panel by panel"),
