@@ -185,7 +185,7 @@ def draw(path: Path, result: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     colours = {"prolate": "tab:blue", "pear": "tab:purple", "oblate": "tab:orange",
                "stomatocyte": "tab:green"}

@@ -536,7 +536,7 @@ def draw(out: Path, result: dict, suffix: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     colours = {"prolate": "tab:blue", "pear": "tab:purple", "oblate": "tab:orange",
                "stomatocyte": "tab:green", "torus": "tab:red", None: "lightgrey"}

@@ -196,7 +196,7 @@ def draw(path: Path, curves: dict, result: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     colours = {"prolate": "tab:blue", "oblate": "tab:orange", "stomatocyte": "tab:green"}
     fig, axes = plt.subplots(1, len(result["eps"]), figsize=(5.2 * len(result["eps"]), 4.4),

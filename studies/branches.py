@@ -232,7 +232,7 @@ def figure(path: Path, payload: dict, curves: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     eps_list = payload["eps"]
     fig, axes = plt.subplots(1, len(payload["pairs"]), figsize=(10, 4))

@@ -64,7 +64,7 @@ import math
 import time
 from pathlib import Path
 
-from fem_ade.plots.render import compact_png
+from fem_ade.plots.figures import compact_png
 from fem_ade.store.status import Status
 
 DT_FACTORS = (100, 30, 10, 3, 1)

@@ -199,7 +199,7 @@ def figure(rows: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.6))
     for arm, marker in zip(ARMS, "os^vD", strict=True):

@@ -70,7 +70,7 @@ import numpy as np
 
 from fem_ade.engine.jobs import status_of
 from fem_ade.model.params import ModelError
-from fem_ade.plots.render import compact_png, save_figure
+from fem_ade.plots.figures import compact_png, save_figure
 from fem_ade.store.status import ENDED, Status
 
 #: the committed gallery (its verdicts also go to fem_ade/verdicts.json when it is --out)

@@ -310,7 +310,7 @@ LONG_FUNCTIONS = {
     "fem_ade/campaigns/sweep_file.py:load_sweep": (65, "each mistake in a sweep file: its error"),
     "fem_ade/scenes/catalogue.py:scene_from_mapping": (72, "each mistake in a TOML scene"),
     "studies/_lib/limit_eps.py:eps_figures": (68, "a matplotlib figure, panel by panel"),
-    "fem_ade/plots/render.py:render_history": (68, "a matplotlib figure, panel by panel"),
+    "fem_ade/plots/history.py:render_history": (68, "a matplotlib figure, panel by panel"),
     "fem_ade/plots/sweep_plot.py:phase_diagram": (65, "a matplotlib figure, layer by layer"),
     "fem_ade/backends/fem/petsc.py:__init__": (62, "the distributed set-up, in PETSc's order"),
 }

@@ -335,11 +335,11 @@ def describe_axisymmetric(be, final: dict, grid=None):
 
 
 # ---------------------------------------------------------------------------------------------
-# the picture: the surface of revolution (what fem_ade.plots.render draws for a 3D run's Surface)
+# the picture: the surface of revolution (what fem_ade.plots.shapes draws for a 3D run's Surface)
 # ---------------------------------------------------------------------------------------------
 class RevolvedSurface:
     """The meridians revolved about z into triangulated surfaces, with the few members of
-    :class:`fem_ade.analysis.shape.Surface` that :mod:`fem_ade.plots.render`'s 3D views use
+    :class:`fem_ade.analysis.shape.Surface` that :mod:`fem_ade.plots.shapes`' 3D views use
     (``n_components``, ``component_mesh``, ``outward_normals_at``, ``points``, ``origin``,
     ``L``, ``h``); ``axis`` (x, y) places them in the scene's box."""
 

@@ -4,7 +4,7 @@
 surfaces there are, the genus of each, whether one lies inside another, the reduced volume
 and reduced area difference, and how many arms (lobes) the largest surface has.
 :func:`extract_surface` returns the triangulated surface itself (used by
-:mod:`fem_ade.plots.render`).
+:mod:`fem_ade.plots.shapes`).
 
 Grid convention (model §6): ``phi[i, j, k]`` is φ at (i, j, k)·h, h = L/n, periodic with
 period L in each direction.

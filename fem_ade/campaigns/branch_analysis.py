@@ -127,7 +127,7 @@ def draw(out: Path, name: str, rows: list[dict], meridians: list) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     paths = []
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
