@@ -96,7 +96,8 @@ def make_cell(args) -> str | None:
 def summarize(root: Path, todo: list[dict], modes: int) -> dict:
     """Per cell: the shape its point is, its 3D unstable count, the modes below the
     threshold, its lowest eigenvalue in units of (ε/R₀)⁴ and whether that is marginal."""
-    from fem_ade.campaigns.branch import read_branch_table, same_branch
+    from fem_ade.campaigns.branch_analysis import same_branch
+    from fem_ade.campaigns.branch_folder import read_branch_table
     from fem_ade.campaigns.stability import UNSTABLE, shape_scale
 
     out = []
@@ -184,7 +185,7 @@ def draw(path: Path, result: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     colours = {"prolate": "tab:blue", "pear": "tab:purple", "oblate": "tab:orange",
                "stomatocyte": "tab:green"}

@@ -15,7 +15,8 @@ branch continued along a finer m₀ grid).
 * **Sharp**: each branch solved at an anchor and continued along m₀ = 0.8, 0.84, …, 1.64
   (``studies/ade_plane.py``'s ``follow``) until it is lost.
 * The lowest of all (the torus included) at each grid point, and the transitions along each
-  line: where the lowest branch's e crosses the next one's (``fem_ade.campaigns.branch.crossing``;
+  line: where the lowest branch's e crosses the next one's
+  (``fem_ade.campaigns.branch_analysis.crossing``;
   sharp: linear between the m₀ grid's points — the difference of two branches' e is nearly
   linear in m₀, as each is w + q(da − m₀)² with da slowly varying).
 
@@ -172,7 +173,8 @@ def run_lines(base: Path, keys: list[dict], archive: dict, workers: int) -> None
     sweep in ``base/sweep`` (:mod:`fem_ade.campaigns.sweep`: a Dask task per line, resumable, a
     failure recorded with its reason), and archive each line's outcome in
     ``base/lines.json`` as soon as the sweep has ended (:func:`archive_line`)."""
-    from fem_ade.campaigns.sweep import listed_sweep, run_sweep
+    from fem_ade.campaigns.sweep import run_sweep
+    from fem_ade.campaigns.sweep_file import listed_sweep
     from fem_ade.model.params import ModelError
     from fem_ade.store.output import write_json_atomic
 
@@ -198,7 +200,7 @@ def archive_line(folder: Path, key: dict) -> dict:
     """A followed line's archive entry: its rows (branch.csv, the columns the report reads),
     or why it has none (its failure record's reason), and its seconds (the task's wall
     time: the seed and every Newton point)."""
-    from fem_ade.campaigns.branch import read_branch_table
+    from fem_ade.campaigns.branch_folder import read_branch_table
     from fem_ade.engine.jobs import failure_record, read_failure, read_summary
 
     failed, summary = read_failure(folder), read_summary(folder)
@@ -225,7 +227,7 @@ def on_branch(row: dict, branch: str, sharp: dict) -> bool:
     must be labelled as ``branch`` or its pair's other branch (:data:`PAIRED`), and where both
     have a sharp shape near this Δa₀ its surface's da must be nearer ``branch``'s, else
     (only ``branch``'s) within DA_TOL or labelled ``branch``."""
-    from fem_ade.campaigns.branch import branch_of_label
+    from fem_ade.campaigns.branch_analysis import branch_of_label
 
     family = branch_of_label(row["label"])
     if branch == "torus" or family == "torus":
@@ -297,10 +299,10 @@ def lowest(values: dict) -> str | None:
 
 def transitions(curves: dict, key: str) -> list[dict]:
     """Along one line: where the lowest branch changes, as the crossing of the two branches
-    (``fem_ade.campaigns.branch.crossing``) on a fine grid of Δa₀."""
+    (``fem_ade.campaigns.branch_analysis.crossing``) on a fine grid of Δa₀."""
     import numpy as np
 
-    from fem_ade.campaigns.branch import crossing
+    from fem_ade.campaigns.branch_analysis import crossing
 
     fine = np.linspace(DEFAULT_SPAN[0], DEFAULT_SPAN[1], 421)
     values = [{b: energy_at(rows, x, key) for b, rows in curves.items()} for x in fine]
@@ -534,7 +536,7 @@ def draw(out: Path, result: dict, suffix: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     colours = {"prolate": "tab:blue", "pear": "tab:purple", "oblate": "tab:orange",
                "stomatocyte": "tab:green", "torus": "tab:red", None: "lightgrey"}

@@ -37,7 +37,7 @@ from types import SimpleNamespace
 from _lib.cli import study_parser
 from _lib.seeded import DA_TOL, make_runs
 from _lib.sharp import follow
-from fem_ade.plots.render import save_figure
+from fem_ade.plots.figures import save_figure
 from fem_ade.store.output import write_json_atomic
 from sharp_ref.branches import LEVELS
 from sharp_ref.membrane import Q_ADE

@@ -46,7 +46,7 @@ from pathlib import Path  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
 
 from _lib.fits import time_to  # noqa: E402
-from fem_ade.plots.render import save_figure  # noqa: E402
+from fem_ade.plots.figures import save_figure  # noqa: E402
 from fem_ade.store.output import write_json_atomic  # noqa: E402
 
 OUT = Path("runs") / "studies"  # the committed results: --out studies/results

@@ -108,7 +108,7 @@ def plan(eps_list, branches, step: float = STEP, modes: int = MODES,
 
 def rows_of(root: Path, name: str) -> tuple[list[dict], list[dict]]:
     """A finished branch's rows (branch.csv) and bifurcations, or ([], [])."""
-    from fem_ade.campaigns.branch import read_branch_table
+    from fem_ade.campaigns.branch_folder import read_branch_table
     from fem_ade.engine.jobs import read_summary
     from fem_ade.store.status import Status
 
@@ -142,7 +142,7 @@ def summarize(root: Path, eps_list, branches, modes: int = MODES) -> dict:
     """Per branch and ε: its points, where it ended, its folds, its stretches stable in 3D,
     its bifurcations; per (branch, m, k-th of that m) the bifurcations' v at each ε and their
     extrapolation."""
-    from fem_ade.campaigns.branch import same_branch
+    from fem_ade.campaigns.branch_analysis import same_branch
 
     table, curves = [], {}
     for seed, R0, start, stop, eps, n in runs_of(eps_list, branches):
@@ -196,7 +196,7 @@ def draw(path: Path, curves: dict, result: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     colours = {"prolate": "tab:blue", "oblate": "tab:orange", "stomatocyte": "tab:green"}
     fig, axes = plt.subplots(1, len(result["eps"]), figsize=(5.2 * len(result["eps"]), 4.4),
@@ -291,7 +291,8 @@ def write_report(out: Path, result: dict, suffix: str = "") -> None:
 
 
 def main(argv=None) -> dict:
-    from fem_ade.campaigns.sweep import listed_sweep, report_rows, run_sweep
+    from fem_ade.campaigns.sweep import report_rows, run_sweep
+    from fem_ade.campaigns.sweep_file import listed_sweep
     from fem_ade.store.output import write_json_atomic
 
     ap = study_parser(__doc__, OUT, quick="ε = 0.04, short stretches", workers="",

@@ -10,7 +10,8 @@ followed at one R₀ (the two branches' ε/R₀ equal), the prolate and the obla
 (the largest at which the prolate at v = 0.62 fits the box) from v = 0.70 down to 0.62
 (0.645 at ε = 0.005), the oblate and the stomatocyte at R₀ = 0.25 from v = 0.62 down to
 0.56 (at ε = 0.005: the oblate to 0.58, the stomatocyte from 0.60 to 0.585). The crossing is
-:func:`fem_ade.campaigns.branch.crossing` (linear between points ~0.002 apart); ε → 0 by Richardson
+:func:`fem_ade.campaigns.branch_analysis.crossing` (linear between points ~0.002 apart); ε → 0
+by Richardson
 with p = 2 (the order every kept branch shows in ``sharp_limit.md``) over
 the two smallest ε with a crossing. The folds (turning points in v) of every branch are
 reported: where a branch ends at finite ε.
@@ -69,7 +70,7 @@ def pairs_of(sweep) -> list[dict]:
 
 def line(root: Path, point) -> list[dict]:
     """A branch point's rows (its branch.csv) once it has ended, else none."""
-    from fem_ade.campaigns.branch import read_branch_table
+    from fem_ade.campaigns.branch_folder import read_branch_table
     from fem_ade.engine.jobs import read_summary
     from fem_ade.store.status import Status
 
@@ -81,7 +82,8 @@ def line(root: Path, point) -> list[dict]:
 
 
 def main(argv=None) -> dict:
-    from fem_ade.campaigns.sweep import load_sweep, report_rows, run_sweep
+    from fem_ade.campaigns.sweep import report_rows, run_sweep
+    from fem_ade.campaigns.sweep_file import load_sweep
     from fem_ade.store.output import write_json_atomic
 
     ap = study_parser(__doc__, OUT, quick="short stretches at eps = 0.04: the code, not the "
@@ -111,10 +113,11 @@ def main(argv=None) -> dict:
 
 
 def transition(base: Path, pair: dict, eps_list: list, curves: dict) -> dict:
-    """One pair's row: its crossing at each ε (:func:`fem_ade.campaigns.branch.crossing`), ε → 0 by
+    """One pair's row: its crossing at each ε
+    (:func:`fem_ade.campaigns.branch_analysis.crossing`), ε → 0 by
     Richardson with p = 2 over the two smallest ε with one, where each branch ended and its
     folds; its branches' (v, e, unstable) added to ``curves``."""
-    from fem_ade.campaigns.branch import crossing, same_branch
+    from fem_ade.campaigns.branch_analysis import crossing, same_branch
 
     upper, lower = pair["branches"]
     name, R0 = f"{upper} → {lower}", pair["R0"]
@@ -229,7 +232,7 @@ def figure(path: Path, payload: dict, curves: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     eps_list = payload["eps"]
     fig, axes = plt.subplots(1, len(payload["pairs"]), figsize=(10, 4))

@@ -64,7 +64,7 @@ import math
 import time
 from pathlib import Path
 
-from fem_ade.plots.render import compact_png
+from fem_ade.plots.figures import compact_png
 from fem_ade.store.status import Status
 
 DT_FACTORS = (100, 30, 10, 3, 1)
@@ -361,7 +361,8 @@ def run_points(specs: list[dict], root: Path, workers: int) -> None:
     """The pass's production runs as one sweep of listed points in ``root``
     (:mod:`fem_ade.campaigns.sweep`: ``root/points/NAME``, on ``workers`` Dask processes, resumable,
     a failure recorded with its reason)."""
-    from fem_ade.campaigns.sweep import listed_sweep, run_sweep
+    from fem_ade.campaigns.sweep import run_sweep
+    from fem_ade.campaigns.sweep_file import listed_sweep
 
     run_sweep(listed_sweep(root.parent.name, specs), root, workers=workers, quiet=True)
 

@@ -53,7 +53,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from _lib.style import COLOURS  # noqa: E402
-from fem_ade.plots.render import save_figure  # noqa: E402
+from fem_ade.plots.figures import save_figure  # noqa: E402
 
 OUT = Path("runs") / "studies"  # the committed results: --out studies/results
 QUANTITIES = ("E", "W", "G", "V", "A", "dA")

@@ -33,7 +33,7 @@ from pathlib import Path
 
 from _lib.fits import time_to
 from _lib.style import COLOURS
-from fem_ade.plots.render import save_figure
+from fem_ade.plots.figures import save_figure
 
 OUT = Path("runs") / "studies"  # the committed results: --out studies/results
 TARGETS = (1e-2, 1e-3, 1e-4, 1e-5)

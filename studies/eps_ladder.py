@@ -40,7 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_ade.campaigns.sweep import Sweep, load_sweep, run_sweep
+from fem_ade.campaigns.sweep import run_sweep
+from fem_ade.campaigns.sweep_file import Sweep, load_sweep
 from fem_ade.store.output import write_json_atomic
 
 HERE = Path(__file__).resolve().parent
@@ -198,7 +199,7 @@ def figure(rows: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.6))
     for arm, marker in zip(ARMS, "os^vD", strict=True):

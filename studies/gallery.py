@@ -70,7 +70,7 @@ import numpy as np
 
 from fem_ade.engine.jobs import status_of
 from fem_ade.model.params import ModelError
-from fem_ade.plots.render import compact_png, save_figure
+from fem_ade.plots.figures import compact_png, save_figure
 from fem_ade.store.status import ENDED, Status
 
 #: the committed gallery (its verdicts also go to fem_ade/verdicts.json when it is --out)
@@ -201,8 +201,9 @@ def kick_spec(spec: dict) -> dict:
 
 
 def as_sweep(specs: list[dict]):
-    """The listed points as one sweep, checked (:func:`fem_ade.campaigns.sweep.check_sweep`)."""
-    from fem_ade.campaigns.sweep import listed_sweep
+    """The listed points as one sweep, checked
+    (:func:`fem_ade.campaigns.sweep_file.check_sweep`)."""
+    from fem_ade.campaigns.sweep_file import listed_sweep
 
     return listed_sweep("gallery", specs, base=specs[0]["base"])
 

@@ -97,7 +97,7 @@ def revolved(line: Path, entry: dict, row: dict, phi, nodes, eps: float | None =
     from fem_ade.analysis.axishape import meridians
     from fem_ade.backends.base import make_backend
     from fem_ade.campaigns.branch import set_parameter
-    from fem_ade.campaigns.identity import read_identity
+    from fem_ade.campaigns.branch_folder import read_identity
     from fem_ade.model.params import ModelError
     from fem_ade.scenes.catalogue import vesicle_scene
     from fem_ade.scenes.initial import Meridian
@@ -159,7 +159,8 @@ def point_spec(name: str, kind: str, scene, n: int) -> dict:
 def run_all(specs: list[dict], base: Path) -> None:
     """The cases' runs as one sweep on two Dask workers (a control beside its kicked run):
     resumable, each run once, a failure recorded with its reason."""
-    from fem_ade.campaigns.sweep import listed_sweep, run_sweep
+    from fem_ade.campaigns.sweep import run_sweep
+    from fem_ade.campaigns.sweep_file import listed_sweep
 
     run_sweep(listed_sweep("nonaxisymmetric", specs), base / "sweep", workers=2, quiet=True)
 

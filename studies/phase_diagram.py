@@ -22,7 +22,9 @@ from pathlib import Path
 
 from _lib.cli import study_parser
 from fem_ade.analysis.sharp import BRANCH_OF_LABEL
-from fem_ade.campaigns.sweep import Sweep, load_sweep, read_sweep_table, row, run_sweep
+from fem_ade.campaigns.sweep import run_sweep
+from fem_ade.campaigns.sweep_file import Sweep, load_sweep
+from fem_ade.campaigns.sweep_points import read_sweep_table, row
 from fem_ade.plots.sweep_plot import draw
 from fem_ade.store.status import ENDED, HAS_RESULT, Status
 

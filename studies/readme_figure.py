@@ -16,7 +16,7 @@ import tempfile
 from pathlib import Path
 
 from fem_ade.engine.runs import recipe, simulate
-from fem_ade.plots.render import compact_png
+from fem_ade.plots.figures import compact_png
 from fem_ade.scenes.catalogue import get_scene
 
 

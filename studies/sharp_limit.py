@@ -75,7 +75,7 @@ from _lib.limit_transitions import (
     transitions_report,
 )
 from _lib.sharp import Cache, ade_sharp, crossing
-from fem_ade.plots.render import save_figure
+from fem_ade.plots.figures import save_figure
 
 DEFAULT_OUT = Path("runs/studies")  # the committed results: --out studies/results
 GRID = tuple(round(0.50 + 0.05 * i, 2) for i in range(10))  # 0.50 … 0.95

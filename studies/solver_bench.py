@@ -47,7 +47,8 @@ def measure(folder: Path, old: bool) -> dict:
     import numpy as np
 
     from fem_ade.backends.fem.newton import NewtonSystem
-    from fem_ade.campaigns.branch import Continuation, load_points
+    from fem_ade.campaigns.branch_folder import load_points
+    from fem_ade.campaigns.continuation import Continuation
     from fem_ade.campaigns.stability import axisymmetric, cartesian, load_state
 
     points = load_points(folder)[:3]

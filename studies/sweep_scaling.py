@@ -29,7 +29,8 @@ import time
 from pathlib import Path
 
 from _lib.cli import study_parser
-from fem_ade.campaigns.sweep import Sweep, run_sweep
+from fem_ade.campaigns.sweep import run_sweep
+from fem_ade.campaigns.sweep_file import Sweep
 from fem_ade.store.status import Status
 
 DEFAULT_OUT = Path("runs/studies")

@@ -308,10 +308,10 @@ LONG_FUNCTIONS = {
     "fem_ade/engine/loop.py:run_loop": (103, "the loop: one place where a step's outcome "
                                              "(accept, retry, diverge, stop, interrupt)"),
     "fem_ade/cli/run.py:build_parser": (96, "argparse: one option per statement"),
-    "fem_ade/campaigns/sweep.py:load_sweep": (65, "each mistake in a sweep file: its error"),
+    "fem_ade/campaigns/sweep_file.py:load_sweep": (65, "each mistake in a sweep file: its error"),
     "fem_ade/scenes/catalogue.py:scene_from_mapping": (72, "each mistake in a TOML scene"),
     "studies/_lib/limit_eps.py:eps_figures": (68, "a matplotlib figure, panel by panel"),
-    "fem_ade/plots/render.py:render_history": (68, "a matplotlib figure, panel by panel"),
+    "fem_ade/plots/history.py:render_history": (68, "a matplotlib figure, panel by panel"),
     "fem_ade/plots/sweep_plot.py:phase_diagram": (65, "a matplotlib figure, layer by layer"),
     "fem_ade/backends/fem/petsc.py:__init__": (62, "the distributed set-up, in PETSc's order"),
 }
@@ -433,16 +433,6 @@ def test_each_backend_has_a_record_of_every_global_term():
 #: shrink, and a module that is no longer long must leave it (issue 41)
 LONG_MODULE = 600
 LONG_MODULES = {
-    "fem_ade/campaigns/branch.py": "split pending (issue 41): continuation of steady states "
-                                   "(the predictor and Newton's corrector, folds, "
-                                   "bifurcations, a point's stability, branch.json, the "
-                                   "branch table and picture, the command line)",
-    "fem_ade/campaigns/sweep.py": "split pending (issue 41): parameter sweeps on Dask (the "
-                                  "sweep file and its points and branches, the runs on the "
-                                  "workers, the sweep table, the command line)",
-    "fem_ade/plots/render.py": "split pending (issue 41): a run's pictures (the 3D view by "
-                               "VTK or matplotlib, the cross-section, the meridians, the "
-                               "history figure, python -m fem_ade.render)",
     "studies/gallery.py": "one study's catalogue of cases (thirteen scenes x the variants x "
                           "two backends) with the plan, archive, verdicts and report that "
                           "read only it (its docstring)",

@@ -319,7 +319,7 @@ def test_crossing_of_two_branches():
     """Two branches with e linear in v cross where the lines do (exact for linear
     interpolation), from either direction; past a fold a branch is not used; branches that
     do not cross give None."""
-    from fem_ade.campaigns.branch import crossing
+    from fem_ade.campaigns.branch_analysis import crossing
 
     v = np.linspace(0.70, 0.62, 9)
     a = [{"v": x, "e": 1.8 - 4.0 * (x - 0.66)} for x in v]
@@ -352,15 +352,15 @@ def test_a_fold_on_the_phase_field_oblate(tmp_path):
 
 def test_stability_equals_a_dense_eigensolve(branch):
     """The lowest eigenvalues of H_L v = λPv on {Cᵀv = 0}, C = (∇V, ∇A, P ∂φ/∂z)
-    (fem_ade.campaigns.branch.stability) are those of the dense problem built column by column from
-    the
+    (fem_ade.campaigns.continuation.stability) are those of the dense problem built column by
+    column from the
     same operators and restricted to the constraints' null space by QR (LOBPCG, used before,
     missed eigenvalues near zero); the translation is not among them."""
     import scipy.linalg as sla
 
     from fem_ade.backends.fem.modes import zero_modes
     from fem_ade.backends.fem.newton import NewtonSystem, linearize
-    from fem_ade.campaigns.branch import stability
+    from fem_ade.campaigns.continuation import stability
 
     scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05, R0=0.2)
     n = json.loads((branch / "branch.json").read_text())["n"]
@@ -413,7 +413,7 @@ def test_stability_equals_a_dense_eigensolve(branch):
 def test_a_branch_ends_at_a_change_of_topology_not_of_label():
     """A genus-0 shape whose label changes (pear → gourd, discocyte → stomatocyte, gourd →
     chain) is the same branch; opening into a torus or pinching into two vesicles ends it."""
-    from fem_ade.campaigns.branch import same_topology
+    from fem_ade.campaigns.branch_analysis import same_topology
 
     for a, b in (("pear", "gourd"), ("discocyte", "stomatocyte"), ("gourd", "chain"),
                  ("prolate", "cylinder"), ("torus", "torus"), ("2 vesicles", "2 vesicles")):
@@ -449,7 +449,7 @@ def test_the_predictor_is_the_quadratic_through_the_last_three_points():
     the quadratic's: O(Δs³) off the arc, where the secant's is O(Δs²) off (the pear at
     ε = 0.01 needed 5-8 Newton iterations a point from it against 6-12, and got past its fold);
     its tangent is the arc's to O(Δs²). From two points: the secant."""
-    from fem_ade.campaigns.branch import Continuation
+    from fem_ade.campaigns.continuation import Continuation
 
     scene = vesicle_scene(v=0.95, branch="prolate", eps=0.05, R0=0.2)
     be = make_backend("fem", scene, n=96, geometry="axisymmetric", scheme="stabilized",

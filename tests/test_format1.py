@@ -92,7 +92,7 @@ def test_format1_is_told_by_the_missing_key(tmp_path):
 def test_a_format1_branch_resumes_as_a_new_branch(tmp_path):
     """A format-1 branch folder (n = 8 cells, no order written) goes on to v = 0.89 with the
     points the same branch made today has; its points' stability reads it."""
-    from fem_ade.campaigns.identity import read_identity
+    from fem_ade.campaigns.branch_folder import read_identity
     from fem_ade.campaigns.stability import main as stability_main
 
     old = tmp_path / "old"

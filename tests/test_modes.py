@@ -296,7 +296,7 @@ def test_a_bifurcation_is_located_at_the_eigenvalues_zero():
     −4e-9, −5.7e-10 stable, the zero in the next interval); the bifurcation is placed at the
     zero there, not at the midpoint of the interval where the count changed. Where no
     neighbouring interval holds a zero, the midpoint, ``located`` False."""
-    from fem_ade.campaigns.branch import bifurcations
+    from fem_ade.campaigns.branch_analysis import bifurcations
 
     def row(v, lowest, count):
         return {"v": v, "s": 1.0 - v, "fold": "", "lowest_m2": lowest,

@@ -187,7 +187,7 @@ def test_a_3d_continuation_step_keeps_the_pins_and_lands_on_a_steady_state():
     along the tangent, the new point is steady (Newton from it: at most one iteration, E
     moved by 7.6e-10, measured) and the pins' values stay (the tangent and the corrections
     are P-orthogonal to the rigid motions)."""
-    from fem_ade.campaigns.branch import Continuation
+    from fem_ade.campaigns.continuation import Continuation
 
     be = _tilted_prolate()
     assert solve_steady(be).converged

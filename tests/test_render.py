@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from fem_ade.plots.render import main, render_history, render_shape
+from fem_ade.plots.history import render_history
+from fem_ade.plots.render import main
+from fem_ade.plots.shapes import render_shape
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -90,7 +92,7 @@ def test_shape_picture_shows_the_membrane_and_its_section(tmp_path):
     """What the 3D view shows: the membrane in its colour, and — VTK — the section y = ½ as
     one whole dark curve across it (flush with the surface it showed as broken "seams"):
     a torus cut by y = ½ in two circles; the dark pixels of the left panel form long runs."""
-    from fem_ade.plots.render import COLOURS, choose_engine
+    from fem_ade.plots.shapes import COLOURS, choose_engine
 
     n = 48
     x = np.arange(n) / n

@@ -241,7 +241,7 @@ def check_regenerate(result, out):
     studies = {p.stem for p in SCRIPTS} - {"regenerate"}
     assert set(result) == studies, set(result) ^ studies
     assert all("--out studies/results" in line for line in result.values()), result
-    from fem_ade.campaigns.sweep import load_sweep
+    from fem_ade.campaigns.sweep_file import load_sweep
 
     regenerate = _load(STUDIES / "regenerate.py")
     listed = regenerate.SWEEPS

@@ -17,7 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from fem_ade.campaigns.sweep import COLUMNS, load_sweep, main, read_sweep_table, run_sweep
+from fem_ade.campaigns.sweep import main, run_sweep
+from fem_ade.campaigns.sweep_file import load_sweep
+from fem_ade.campaigns.sweep_points import COLUMNS, read_sweep_table
 from fem_ade.model.params import ModelError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -193,7 +195,7 @@ def test_slurm_config(tmp_path, monkeypatch):
 def test_sweep_point_in_the_axisymmetric_geometry(tmp_path):
     """``geometry = "axisymmetric"`` in [run] runs a point on the FEM's (r, z) half-plane
     (docs/model.md §11): its run folder says so, its row has the end state."""
-    from fem_ade.campaigns.sweep import run_point
+    from fem_ade.campaigns.sweep_points import run_point
 
     text = SWEEP.format(axes="[0.9]", steps=30).replace('backend = "spectral"\nn = 16',
                                                        'backend = "fem"\ngeometry = '
@@ -379,10 +381,10 @@ BAD_LISTED_BRANCHES = [
 
 
 def test_a_sweep_listed_in_code_is_the_sweep_file_s(tmp_path):
-    """fem_ade.campaigns.sweep.listed_sweep (the studies' sweeps built from their plans) makes the
-    points a sweep file listing the same tables makes: the same names and identities, runs
+    """fem_ade.campaigns.sweep_file.listed_sweep (the studies' sweeps built from their plans)
+    makes the points a sweep file listing the same tables makes: the same names and identities, runs
     and branches alike; and it checks them as load_sweep does."""
-    from fem_ade.campaigns.sweep import listed_sweep
+    from fem_ade.campaigns.sweep_file import listed_sweep
 
     path = tmp_path / "l.toml"
     path.write_text('name = "b"\nseeds = ["prolate"]\n[branch]\nparam = "v"\nfrom = 0.95\n'
@@ -574,7 +576,7 @@ def test_listed_points_start_from_each_others_end(tmp_path, capsys):
     assert main([str(path), "--out", str(out)]) == 0  # again: nothing runs
     assert "3 points, 3 done, 0 to run" in capsys.readouterr().out
     # a at other settings: a refused, and b and c with it (each is where it starts from)
-    from fem_ade.campaigns.sweep import changed
+    from fem_ade.campaigns.sweep_points import changed
 
     other = load_sweep(_write(tmp_path / "other.toml",
                               CHAIN.replace("max_steps = 12", "max_steps = 11")))
@@ -608,7 +610,7 @@ def test_a_point_after_a_failed_one_fails_with_the_reason(tmp_path):
 def test_a_point_waits_while_its_start_has_not_ended(tmp_path):
     """b's start a has not ended (not run yet, or a checkpoint another process holds): b is
     ``busy`` (the driver asks again later) and nothing of b's is written."""
-    from fem_ade.campaigns.sweep import run_point
+    from fem_ade.campaigns.sweep_points import run_point
 
     b = load_sweep(_write(tmp_path / "chain.toml", CHAIN)).points()[1]
     r = run_point(b, str(tmp_path))
@@ -662,7 +664,7 @@ def test_a_listed_point_with_a_scene_of_its_own(tmp_path, capsys):
     """A listed point's base may be a scene's table (what scene_to_mapping makes of a scene
     built in code): it runs as that scene does (the same end as the named scene's point);
     a table that is no scene is one line before anything runs."""
-    from fem_ade.campaigns.sweep import Sweep, check_sweep
+    from fem_ade.campaigns.sweep_file import Sweep, check_sweep
     from fem_ade.scenes.catalogue import get_scene, scene_to_mapping
 
     own = scene_to_mapping(get_scene("discocyte"))

@@ -339,7 +339,7 @@ def describe_axisymmetric(be, final: dict, grid=None):
 # ---------------------------------------------------------------------------------------------
 class RevolvedSurface:
     """The meridians revolved about z into triangulated surfaces, with the few members of
-    :class:`fem_ade.analysis.surface.Surface` that :mod:`fem_ade.plots.render`'s 3D views use
+    :class:`fem_ade.analysis.surface.Surface` that :mod:`fem_ade.plots.shapes`' 3D views use
     (``n_components``, ``component_mesh``, ``outward_normals_at``, ``points``, ``origin``,
     ``L``, ``h``); ``axis`` (x, y) places them in the scene's box."""
 

@@ -6,7 +6,7 @@ and reduced area difference, and how many arms (lobes) the largest surface has.
 The surface itself (extracted, periodically closed and oriented, and a component's
 topology, volume, curvature and arms) is :mod:`fem_ade.analysis.surface`'s:
 :func:`~fem_ade.analysis.surface.extract_surface` returns it (also for
-:mod:`fem_ade.plots.render`). This module turns its measures into descriptors, and those into a
+:mod:`fem_ade.plots.shapes`). This module turns its measures into descriptors, and those into a
 label by the thresholds below, the one decision tree of both geometries.
 
 Descriptors

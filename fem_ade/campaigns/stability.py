@@ -207,7 +207,7 @@ def read_fields(path: Path) -> dict:
 
 def _branch_point(folder: Path, branch: Path):
     from fem_ade.backends.fem.axisym import SavedMeshBackend
-    from fem_ade.campaigns.identity import read_identity
+    from fem_ade.campaigns.branch_folder import read_identity
     from fem_ade.model.params import Params
     from fem_ade.scenes.vesicle import set_parameter
 

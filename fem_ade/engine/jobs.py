@@ -175,7 +175,7 @@ def _holds_another(folder: Path, scene, options, after) -> str:
     (:func:`fem_ade.engine.folder.run_identity`); with a start field (``after``, ``phi0``) the
     initial condition is that field's, not compared. A ``make`` job, or a scene or options
     given as functions (made only when a run starts), are the caller's to check: a sweep
-    compares each point's NAME.point.json (:func:`fem_ade.campaigns.sweep.changed`)."""
+    compares each point's NAME.point.json (:func:`fem_ade.campaigns.sweep_points.changed`)."""
     if scene is None or callable(scene) or callable(options):
         return ""
     from fem_ade.engine.folder import identity_difference

@@ -58,7 +58,7 @@ def phase_diagram(rows: list[dict], sweep, path: Path) -> Path:
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     axes = list(sweep.axes)
     xkey = axes[0] if axes else None
@@ -127,7 +127,7 @@ def energy_diagram(rows: list[dict], sweep, path: Path, xkey: str) -> Path:
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    from fem_ade.plots.render import save_figure
+    from fem_ade.plots.figures import save_figure
 
     seeds = list(sweep.seeds)
     fig, ax = plt.subplots(figsize=(7.5, 5.0))

@@ -21,7 +21,7 @@ from _lib.seeded import (
     make_runs,
 )
 from _lib.sharp import Cache, branch_key
-from fem_ade.plots.render import save_figure
+from fem_ade.plots.figures import save_figure
 from fem_ade.store.output import write_json_atomic
 
 EPS = (0.04, 0.032, 0.02, 0.016, 0.0128, 0.01)

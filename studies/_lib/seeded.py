@@ -127,7 +127,8 @@ def make_runs(root: Path, jobs: list[SimpleNamespace], workers: int = 2) -> list
     ``root/sweep/points/NAME`` (:func:`point_name`), resumable, a failure recorded with its
     reason (and printed here). Returns (job, row) (:func:`phase_field_row`) of those that
     ended with a result, in the jobs' order."""
-    from fem_ade.campaigns.sweep import listed_sweep, run_sweep
+    from fem_ade.campaigns.sweep import run_sweep
+    from fem_ade.campaigns.sweep_file import listed_sweep
     from fem_ade.engine.jobs import read_failure, read_summary
     from fem_ade.scenes.catalogue import scene_to_mapping
 

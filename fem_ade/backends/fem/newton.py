@@ -44,7 +44,7 @@ from iterate 0 it is 5.6e-5 there, −2.2e-5 midway and 5.5e-5 at φ*; from iter
 away) 3.1e-6 against 2.6e-6 at φ*. Newton's quadratic basin is |δφ|∞ ≲ 1e-3 at ε = 0.005
 (~1e-2 at 0.01) and shrinks with the shape modes' eigenvalues (in units of P the lowest are ~1e-5 at
 ε = 0.01, ~1.5e-6 at 0.005): a start
-nearer φ* (a branch's predictor: :meth:`fem_ade.campaigns.branch.Continuation.predict`) saves
+nearer φ* (a branch's predictor: :meth:`fem_ade.campaigns.continuation.Continuation.predict`) saves
 iterations, a more exact step does not.
 """
 
