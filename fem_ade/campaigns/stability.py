@@ -123,29 +123,17 @@ def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
 
     from scipy.sparse.linalg import LinearOperator, eigsh
 
-    from fem_ade.backends.fem.modes import p_orthogonal, rigid_motions
+    from fem_ade.backends.fem.modes import p_orthogonal, zero_modes
     from fem_ade.backends.fem.newton import NewtonSystem, linearize
 
     t0 = time.perf_counter()
     sys_ = NewtonSystem(be)
     lin = linearize(sys_, be.phi.copy())
-    step, N = sys_.step, be.phi.size
-    w, K = be.space.weights, be.space.K
-    a, c, ke = sys_.bulk()
-
-    def P(x):
-        x = np.ravel(x)
-        Kx = K @ x
-        return a * w * x + c * Kx + ke * (K @ (Kx / w))
-
-    extra = []
+    step, N, P = sys_.step, be.phi.size, sys_.P
     if getattr(be, "geometry", "cartesian") == "axisymmetric":
-        from fem_ade.backends.fem.modes import zero_modes
-
-        extra = zero_modes(be.space, lin.phi, 0)
-    elif be.space.dim == 3:
-        extra = rigid_motions(be, lin.phi)
-    Cs = list(lin.C[:2]) + p_orthogonal(P, extra)
+        Cs = list(lin.C[:2]) + p_orthogonal(P, zero_modes(be.space, lin.phi, 0))
+    else:  # in 3D Newton's pins are P times this state's rigid motions, made P-orthogonal
+        Cs = list(lin.C)
     C = np.column_stack(Cs)
     Y = np.column_stack([sys_.P_inverse(cj) for cj in Cs])
     G = np.linalg.inv(C.T @ Y)
