@@ -137,7 +137,7 @@ def plan(scene, **options) -> str:
     """What ``simulate(scene, **options)`` would run, in one line — every input checked as
     :func:`simulate` checks it (ModelError, TypeError), the backend built, nothing written
     (``python -m fem_ade.run --dry-run``)."""
-    defaults = {k: p.default for k, p in inspect.signature(simulate).parameters.items()}
+    defaults = _simulate_defaults()
     unknown = sorted((set(options) - set(defaults)) | ({"scene"} & set(options)))
     if unknown:
         raise TypeError(f"plan() takes simulate's keywords; not {', '.join(unknown)}")
@@ -209,9 +209,14 @@ def _start_field(scene, phi0) -> tuple:
 _RUN_KEYWORDS = tuple(f.name for f in dataclass_fields(RunConfig))
 
 
+def _simulate_defaults() -> dict:
+    """simulate's keywords and their defaults (``scene``: no default)."""
+    return {k: p.default for k, p in inspect.signature(simulate).parameters.items()}
+
+
 def _run_keywords_given(values: dict) -> list[str]:
     """The run keywords of a simulate call that differ from their defaults."""
-    defaults = {k: p.default for k, p in inspect.signature(simulate).parameters.items()}
+    defaults = _simulate_defaults()
     return [k for k in _RUN_KEYWORDS if values[k] is not defaults[k]
             and values[k] != defaults[k]]
 
