@@ -12,8 +12,8 @@ from fem_ade.backends.fem.modes import lowest, lowest_mode, mode_block
 from fem_ade.backends.fem.newton import NewtonSystem, linearize
 from fem_ade.campaigns.branch import main as branch_main
 from fem_ade.campaigns.stability import load_state
-from fem_ade.campaigns.switch import main as switch_main
 from fem_ade.campaigns.switch import start_fields
+from fem_ade.cli.switch import main as switch_main
 from fem_ade.model.params import ModelError
 from fem_ade.scenes.fields import load_meridian_field, meridian_values
 
@@ -166,3 +166,79 @@ def test_a_kick_along_a_stable_mode_returns_to_the_revolved_state(oblate, tmp_pa
     rest = np.abs(d - motions @ a).max()
     assert rest < 1e-3 and rest < np.abs(d).max() / 4  # mostly a rigid motion
     assert np.abs(a[:3]).max() < 1e-4  # a translation of ~5.6e-5 L
+
+
+def _mirror(be, phi, perm):
+    """φ at the nodes moved by ``perm`` (x, y about the axis; coordinates (3, N) → (3, N))."""
+    X = np.asarray(be.space.doflocs)
+    L = be.params.L
+    key = {tuple(np.round(np.mod(p, L) / L * 4096).astype(int)): i for i, p in enumerate(X.T)}
+    moved = np.mod(perm(X), L)
+    index = [key[tuple(np.round(p / L * 4096).astype(int))] for p in moved.T]
+    return phi[index]
+
+
+def test_following_the_born_branch_in_3d(oblate, tmp_path, capsys):
+    """--follow: the branch born at the m = 2 bifurcation, by continuation on the 3D FEM.
+    Its first two points hold the mode's amplitude at 0.1 and 0.2; each point has the mode's
+    symmetry — mirror planes through the axis along the mesh's x and y (cos 2θ is even in
+    both) but not the quarter turn the revolved oblate has (cos 2θ changes sign) — and is a
+    steady state; a second run goes on from the last point."""
+    from fem_ade.campaigns.branch_folder import load_points, read_branch_table
+    from fem_ade.campaigns.continuation import Continuation
+    from fem_ade.campaigns.switch_branch import _start
+
+    out = tmp_path / "d2"
+    common = [str(oblate), "--follow", "2", "--n", "32", "--order", "8", "--quiet",
+              "--out", str(out)]
+    assert switch_main(common) == 0
+    first = read_branch_table(out)
+    assert [r["amplitude"] for r in first] == pytest.approx([0.1, 0.2], abs=1e-9)
+    common[2] = "3"
+    assert switch_main(common) == 0
+    rows = read_branch_table(out)
+    assert len(rows) == 3 and rows[:2] == first  # gone on from its points
+    assert rows[2]["amplitude"] > 0.2 and json.loads((out / "ended.json").read_text())[
+        "points"] == 3
+    assert (out / "branch3d.png").is_file()
+    _, be, psi = _start(oblate, 0, None, None, 32, 8)
+    ax, ay = (float(a) for a in np.load(oblate / "points" / "0003" / "final.npz")["axis"])
+    phi0 = be.phi.copy()
+
+    def quarter(X):
+        return np.stack([ax - (X[1] - ay), ay + (X[0] - ax), X[2]])
+
+    def mirror_x(X):
+        return np.stack([2 * ax - X[0], X[1], X[2]])
+
+    def mirror_y(X):
+        return np.stack([X[0], 2 * ay - X[1], X[2]])
+
+    assert np.max(np.abs(_mirror(be, phi0, quarter) - phi0)) < 1e-9  # the control
+    points = load_points(out)
+    for _, phi in points:
+        for move in (mirror_x, mirror_y):
+            assert np.max(np.abs(_mirror(be, phi, move) - phi)) < 1e-8
+        assert np.max(np.abs(_mirror(be, phi, quarter) - phi)) > 0.1
+    row, phi = points[-1]
+    be._set(phi, None)
+    Continuation(be, "v").set_p(row["v"])  # the last point's parameters
+    sys_ = NewtonSystem(be)
+    lin = linearize(sys_, be.phi)
+    assert np.max(np.abs(lin.violation[:2])) < 1e-10 * be.params.alpha
+    assert np.linalg.norm(lin.grad) < 1e-5 * np.linalg.norm(sys_.gradient(be.phi))
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--follow", "0"], "a positive integer"),
+    (["--follow", "2", "--step", "2"], "amplitude per step, in (0, 1]"),
+    (["--follow", "2", "--delta", "0.2"], "are the flow's"),
+    (["--step", "0.2"], "go with --follow"),
+    (["--follow", "2", "--n", "32", "--order", "4"], "no first point at v = "),
+])
+def test_follow_refusals_are_one_line(oblate, tmp_path, capsys, args, message):
+    out = tmp_path / "never"
+    assert switch_main([str(oblate), "--out", str(out), "--quiet", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err
+    assert not out.exists()

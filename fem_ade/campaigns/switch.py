@@ -29,10 +29,8 @@ question a negative eigenvalue raises; following an unstable non-axisymmetric br
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
-import sys
 import tempfile
 from pathlib import Path
 
@@ -167,63 +165,3 @@ def switch(branch: str | Path, index: int | None, out: str | Path, *, delta: flo
             kw["max_steps"] = max_steps
         result = simulate(scene, out=out, **kw)
     return result, origin
-
-
-def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
-        prog="python -m fem_ade.switch",
-        description="Switch from a bifurcation of an axisymmetric branch (fem_ade.branch "
-                    "--modes) to the 3D state its instability leads to: a 3D run folder.")
-    ap.add_argument("branch", help="a branch folder with its points and bifurcations.json")
-    ap.add_argument("--bifurcation", type=int, default=None,
-                    help="which of bifurcations.json's (default 0, the first)")
-    ap.add_argument("--mode", type=int, default=None,
-                    help="with --point: switch along this block m >= 1 at that point (no "
-                         "bifurcation needed: a branch unstable in m all along)")
-    ap.add_argument("--out", required=True, help="the 3D run folder to write")
-    ap.add_argument("--point", type=int, default=None,
-                    help="switch from this point of the branch (its block m unstable) "
-                         "instead of the bifurcation's nearest")
-    ap.add_argument("--delta", type=float, default=DELTA,
-                    help=f"the start's max |delta psi| (default {DELTA})")
-    ap.add_argument("--n", type=int, default=None,
-                    help=f"nodes per axis (default {NODES_PER_EPS} L/eps, up to the order)")
-    ap.add_argument("--order", type=int, default=RUN_ORDERS["tensor"],
-                    help=f"FEM element order (default {RUN_ORDERS['tensor']})")
-    ap.add_argument("--backend", choices=("fem", "spectral"), default="fem")
-    ap.add_argument("--max-steps", type=int, default=None,
-                    help="at most this many steps (default: the steady recipe's)")
-    ap.add_argument("--checkpoint-every", type=int, default=200,
-                    help="a checkpoint every K steps, for --resume (default 200)")
-    ap.add_argument("--quiet", action="store_true")
-    return ap
-
-
-def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
-    from fem_ade.store.interrupt import install
-
-    install()  # SIGTERM as SIGINT: the run keeps its checkpoint; --resume goes on
-    try:
-        result, origin = switch(args.branch, args.bifurcation, args.out, delta=args.delta,
-                                n=args.n, order=args.order, backend=args.backend,
-                                max_steps=args.max_steps, point=args.point,
-                                checkpoint_every=args.checkpoint_every, mode=args.mode,
-                                quiet=args.quiet)
-    except ModelError as err:
-        print(f"fem_ade.switch: error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"fem_ade.switch: interrupted; python -m fem_ade.run --resume {args.out} goes "
-              "on", file=sys.stderr)
-        return 130
-    where = ("" if origin["bifurcation"] is None else
-             f" bifurcation {origin['bifurcation']}")
-    print(f"switched from {origin['branch']}{where} (m = "
-          f"{origin['m']}, point {origin['point']}, eigenvalue {origin['eigenvalue']:.3e}): "
-          f"{args.out} ({result.status})")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -13,7 +13,7 @@ COMMANDS = {
     "branch": "fem_ade.campaigns.branch",
     "render": "fem_ade.plots.render",
     "stability": "fem_ade.campaigns.stability",
-    "switch": "fem_ade.campaigns.switch",
+    "switch": "fem_ade.cli.switch",
 }
 
 USAGE = "usage: fem-ade {" + ",".join(COMMANDS) + "} ...   (fem-ade COMMAND --help for its options)"
