@@ -49,6 +49,8 @@ import math  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from _lib.branches import branch_rows, make_branch  # noqa: E402
+
 OUT = Path("runs") / "studies"
 #: the switches: (name, ε, R₀, the oblate branch's v from, to, step, the point switched
 #: from, the 3D mesh's nodes per axis and order)
@@ -63,30 +65,6 @@ STARFISH = ((0.8, 1.64, "oblate", ("prolate", "pear")),
             (0.7, 1.64, "prolate", ("oblate",)))
 
 
-def _branch(out: Path, args: list[str]) -> Path:
-    """A branch folder made once by ``python -m fem_ade.branch`` (kept: a second run reads
-    it); ModelError's line where its seed is not the branch."""
-    from fem_ade.campaigns.branch import main as branch_main
-
-    if not (out / "branch.csv").is_file():
-        import contextlib
-        import io
-
-        err = io.StringIO()
-        with contextlib.redirect_stderr(err):
-            code = branch_main([*args, "--quiet", "--out", str(out)])
-        if code != 0:
-            return err.getvalue().strip().removeprefix("fem_ade.branch: error: ")
-    return out
-
-
-def _rows(folder: Path) -> list[dict]:
-    import csv
-
-    with open(folder / "branch.csv") as f:
-        return list(csv.DictReader(f))
-
-
 def switch_case(root: Path, case: tuple) -> dict:
     """One switch: the oblate branch, the 3D run from its point, the end's stability and
     the axisymmetric prolate at the same v."""
@@ -96,10 +74,10 @@ def switch_case(root: Path, case: tuple) -> dict:
 
     name, eps, R0, v0, v1, dv, point, n, order = case
     common = ["vesicle", "--eps", str(eps), "--R0", str(R0), "--param", "v"]
-    oblate = _branch(root / f"oblate-{name}", [*common, "--branch", "oblate", "--from",
+    oblate = make_branch(root / f"oblate-{name}", [*common, "--branch", "oblate", "--from",
                                                str(v0), "--to", str(v1), "--step", str(dv),
                                                "--modes", "3"])
-    row = _rows(oblate)[point]
+    row = branch_rows(oblate)[point]
     run = root / f"switched-{name}"
     if not (run / "summary.json").is_file():
         switch(oblate, None, run, n=n, order=order, point=point, mode=2, quiet=True)
@@ -114,10 +92,10 @@ def switch_case(root: Path, case: tuple) -> dict:
     stab = cartesian(be, 6)
     stability_s = time.perf_counter() - t0
     v = float(row["v"])
-    prolate = _branch(root / f"prolate-{name}", [*common, "--branch", "prolate", "--from",
+    prolate = make_branch(root / f"prolate-{name}", [*common, "--branch", "prolate", "--from",
                                                  repr(v), "--to", repr(v - 0.002), "--step",
                                                  "0.002", "--modes", "2"])
-    pro = _rows(prolate)[0]
+    pro = branch_rows(prolate)[0]
     body = s["shape"].get("body") or {}
     return {"name": name, "eps": eps, "R0": R0, "n": n, "order": order, "v": v,
             "oblate_e": float(row["e"]), "oblate_lowest_m2": float(row["lowest_m2"]),
@@ -135,14 +113,14 @@ def stomatocyte_case(root: Path, eps: float, R0: float) -> dict:
     its seed is not one."""
     from fem_ade.campaigns.stability import shape_scale
 
-    made = _branch(root / f"stomatocyte-eps={eps:g}-R0={R0:g}",
+    made = make_branch(root / f"stomatocyte-eps={eps:g}-R0={R0:g}",
                    ["vesicle", "--branch", "stomatocyte", "--v", "0.6", "--kbar", str(KBAR),
                     "--eps", str(eps), "--R0", str(R0), "--param", "da0", "--from", "0.8",
                     "--to", "0.79", "--step", "0.01", "--modes", "4"])
     out = {"eps": eps, "R0": R0}
     if isinstance(made, str):
         return {**out, "failed": made}
-    row = _rows(made)[0]
+    row = branch_rows(made)[0]
     lowest = [float(row[f"lowest_m{m}"]) for m in range(5)]
     return {**out, "failed": None, "label": row["label"], "e": float(row["e"]),
             "lowest": lowest, "lowest_m2_scaled": lowest[2] / shape_scale(eps, R0),

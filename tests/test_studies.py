@@ -411,6 +411,24 @@ def check_switch(result, out):
     assert (out / "switch_quick.md").is_file() and (out / "switch_quick-eps=0.04.png").is_file()
 
 
+def check_branch3d(result, out):
+    """At ε = 0.04 on 32³ nodes of order 8: three points of the oblate's m = 2 branch in 3D,
+    the first two at the mode's amplitudes 0.1 and 0.2, each triaxial (three different
+    semi-axes: the mode's D2 shape) with its e within 2 % of the oblate's at the same v
+    (they meet at the bifurcation), the report and figure written."""
+    (c,) = result["cases"]
+    assert c["m"] == 2 and len(c["rows"]) == 3
+    rows = c["rows"]
+    assert [r["amplitude"] for r in rows[:2]] == pytest.approx([0.1, 0.2], abs=1e-9)
+    for r in rows:
+        a1, a2, a3 = r["semi_axes"]
+        assert a1 > a2 * 1.005 and a2 > a3 * 1.05
+        if r["e_oblate"] is not None:
+            assert abs(r["e"] / r["e_oblate"] - 1) < 0.02
+        assert r["unstable_3d"] is not None and len(r["eigenvalues"]) == 4
+    assert (out / "branch3d_quick.md").is_file() and (out / "branch3d_quick.png").is_file()
+
+
 ARGS = {"readme_figure": ["--steps", "2", "--n", "24"]}
 #: where each study writes by default (under the current directory)
 DEFAULT_OUT = {"gallery": "runs/gallery", "readme_figure": "runs/readme"}
@@ -536,7 +554,7 @@ def test_package_verdicts_are_the_committed_gallerys():
 REPORTS = {"constraints_study": [], "sharp_limit": [], "gallery": [], "ade_plane": [],
            "axisymmetric": [], "nonaxisymmetric": ["--eps", "0.02"], "eps_ladder": [],
            "phase_diagram": [], "branches": [], "ade_branches": [], "azimuthal": [],
-           "ade_azimuthal": []}
+           "ade_azimuthal": [], "branch3d": []}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
