@@ -45,7 +45,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import ndimage
 
 from fem_ade.analysis.surface import (
     Surface,
@@ -56,6 +55,7 @@ from fem_ade.analysis.surface import (
     signed_volume,
     winding_number,
 )
+from fem_ade.analysis.symmetry import Frame, principal_frame
 from fem_ade.model.params import reduced_area_difference, reduced_volume
 
 #: summary.json → shape: the descriptors of the sharp surface kept at its top level
@@ -208,26 +208,15 @@ def count_necks(area: np.ndarray) -> tuple[int, float]:
     return necks, worst
 
 
-def body_geometry(S: Surface) -> dict | None:
+def body_geometry(S: Surface, frame: Frame | None = None) -> dict | None:
     """Principal semi-axes, necks and dimple of the largest region {φ > 0} (None if there is
-    none, or it winds around the periodic box). See the module docstring."""
-    region = S.phi > 0
-    labels, count = ndimage.label(region)
-    if count == 0:
+    none, or it winds around the periodic box), in its :func:`principal_frame` (``frame``:
+    a precomputed one). See the module docstring."""
+    F = frame if frame is not None else principal_frame(S)
+    if F is None:
         return None
-    sizes = np.bincount(labels.ravel())[1:]
-    mask = labels == 1 + int(np.argmax(sizes))
-    idx = np.argwhere(mask)
-    if any(idx[:, a].min() == 0 and idx[:, a].max() == S.phi.shape[a] - 1 for a in range(3)):
-        return None  # it spans an axis of the box: no finite body to measure
-    if len(idx) < 27:
-        return None  # a few grid cells: too small to measure
-    X = S.origin + idx * S.h
-    c = X.mean(axis=0)
-    Y = X - c
-    lam, vec = np.linalg.eigh(Y.T @ Y / len(Y))
-    lam, vec = lam[::-1], vec[:, ::-1]  # a₁ ≥ a₂ ≥ a₃
-    axes = np.sqrt(5.0 * np.maximum(lam, 0.0))
+    c, vec, axes = F.centre, F.axes, F.semi_axes
+    Y = F.points - c
     h = float(S.h.min())
     cell = float(np.prod(S.h))
     # cross-section area along the long axis
