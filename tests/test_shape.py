@@ -355,3 +355,13 @@ def test_a_bump_breaks_the_axisymmetry():
     assert small["group"] == "D∞h" and small["axes"][0]["axisymmetric"]
     assert large["group"] == "Cs" and not any(a["axisymmetric"] for a in large["axes"])
 
+
+
+def test_describe_reports_the_symmetry():
+    """describe() keeps the symmetry under ``body``; a tilted prolate (0.15 × 0.15 × 0.25)
+    is a prolate of group D∞h; summary_line names the group."""
+    from fem_ade.analysis.shape import summary_line
+
+    pro = describe(profile(_spheroid((0.15, 0.15, 0.25), TILT), EPS_S), L)
+    assert pro["label"] == "prolate" and pro["body"]["symmetry"]["group"] == "D∞h"
+    assert "1 component, genus 0, arms = 1, symmetry D∞h;" in summary_line(pro)

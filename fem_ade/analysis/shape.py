@@ -34,6 +34,11 @@ Descriptors
   ``elongation`` a₁/a₂ and ``flatness`` a₃/a₂, the ``necks`` along the long axis (minima of
   the cross-section area below 85 % of the smaller maximum beside them) and the ``dimple``
   1 − (thickness at the centre)/(largest thickness) across the short axis (> 0: biconcave).
+  In 3D also its ``symmetry`` (:func:`fem_ade.analysis.symmetry.symmetry`): which rotations
+  about the principal axes (m-fold, m ≤ 8, or axisymmetric) and which mirror planes map φ
+  onto itself within :data:`~fem_ade.analysis.symmetry.SYMMETRY_TOL`, and the Schoenflies
+  ``group`` they make (Kh for a sphere, D∞h for a prolate or oblate, C∞v for a pear, D2h
+  for a triaxial ellipsoid, D3h/D4h for a flat three-/four-armed starfish, …).
 * ``label``: a name for all of it (:func:`classify`, the one decision tree of both
   geometries): sphere, prolate, oblate, discocyte, cylinder, gourd, chain, torus, genus-g,
   starfish-k, nested, k vesicles, wrapping, no membrane; and from an axisymmetric run's
@@ -55,7 +60,7 @@ from fem_ade.analysis.surface import (
     signed_volume,
     winding_number,
 )
-from fem_ade.analysis.symmetry import Frame, principal_frame
+from fem_ade.analysis.symmetry import Frame, principal_frame, symmetry
 from fem_ade.model.params import reduced_area_difference, reduced_volume
 
 #: summary.json → shape: the descriptors of the sharp surface kept at its top level
@@ -80,7 +85,8 @@ def describe(phi: np.ndarray, L: float, *, V: float | None = None, A: float | No
     component enclosing it, or None), ``wraps`` (per component: it winds around the
     periodic box), ``reduced_volume``, ``reduced_area_difference``, ``arms`` (int, lobes of
     the largest component, 1 = no arms; 0 if there is no surface or it wraps),
-    ``arms_per_component``, ``area_per_component``, ``sources`` and ``sharp`` (V, A,
+    ``arms_per_component``, ``area_per_component``, ``body`` (:func:`body_geometry` and its
+    ``symmetry``, None without a finite body), ``label``, ``sources`` and ``sharp`` (V, A,
     mean_curvature_integral, reduced_volume, reduced_area_difference of the extracted
     surface), and ``shift`` (the grid roll used to centre the surface).
     """
@@ -166,7 +172,10 @@ def _nesting(S: Surface, areas: list[float]) -> list[int | None]:
 
 
 def _with_label(S, nc, genus, inside_of, arms) -> dict:
-    body = body_geometry(S) if nc else None
+    frame = principal_frame(S) if nc else None
+    body = body_geometry(S, frame) if frame is not None else None
+    if body is not None:
+        body["symmetry"] = symmetry(S, frame=frame)
     first = (arms[0] if arms[0] is not None else 0) if nc else 0
     d = {"components": nc, "genus": genus, "nested": any(k is not None for k in inside_of),
          "arms": first, "body": body}
@@ -281,12 +290,22 @@ def classify(d: dict) -> str:
     return "sphere"
 
 
+def symmetry_group(d: dict) -> str | None:
+    """The Schoenflies name of the body's symmetry in :func:`describe`'s result or in
+    summary.json's ``shape`` (None where there is none: no finite body, or an axisymmetric
+    run's descriptors)."""
+    return ((d.get("body") or {}).get("symmetry") or {}).get("group")
+
+
 def summary_line(d: dict, given: str = "given V, A, ΔA") -> str:
-    """A one-line human summary of :func:`describe`'s result (sharp values always shown)."""
+    """A one-line human summary of :func:`describe`'s result (sharp values always shown;
+    the body's symmetry group where there is one)."""
     nc = d["components"]
     g = ", ".join(str(x) for x in d["genus"]) or "-"
+    group = symmetry_group(d)
     head = (f"{nc} component{'s' if nc != 1 else ''}, genus {g}"
-            f"{', nested' if d['nested'] else ''}, arms = {d['arms']}")
+            f"{', nested' if d['nested'] else ''}, arms = {d['arms']}"
+            f"{f', symmetry {group}' if group else ''}")
     sharp = d["sharp"]
     sharp_part = (f"v = {sharp['reduced_volume']:.3f}, Δa = "
                   f"{sharp['reduced_area_difference']:.3f} (sharp surface)")
