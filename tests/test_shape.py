@@ -356,12 +356,16 @@ def test_a_bump_breaks_the_axisymmetry():
     assert large["group"] == "Cs" and not any(a["axisymmetric"] for a in large["axes"])
 
 
+def test_describe_reports_the_symmetry_and_names_a_triaxial_ellipsoid():
+    """describe() keeps the symmetry under ``body``; the triaxial ellipsoid (D2h, elongated
+    and flat) is labelled ``ellipsoid`` where it was prolate, a tilted prolate (0.15 ×
+    0.15 × 0.25) stays a prolate; summary_line names the group."""
+    from fem_ade.analysis.shape import classify, summary_line
 
-def test_describe_reports_the_symmetry():
-    """describe() keeps the symmetry under ``body``; a tilted prolate (0.15 × 0.15 × 0.25)
-    is a prolate of group D∞h; summary_line names the group."""
-    from fem_ade.analysis.shape import summary_line
-
+    tri = describe(profile(SYMMETRIC["triaxial"](), EPS_S), L)
+    assert tri["body"]["symmetry"]["group"] == "D2h" and tri["label"] == "ellipsoid"
+    without = {k: v for k, v in tri["body"].items() if k != "symmetry"}
+    assert classify(tri | {"body": without}) == "prolate"  # the label it had before
     pro = describe(profile(_spheroid((0.15, 0.15, 0.25), TILT), EPS_S), L)
     assert pro["label"] == "prolate" and pro["body"]["symmetry"]["group"] == "D∞h"
     assert "1 component, genus 0, arms = 1, symmetry D∞h;" in summary_line(pro)

@@ -41,8 +41,8 @@ Descriptors
   for a triaxial ellipsoid, D3h/D4h for a flat three-/four-armed starfish, …).
 * ``label``: a name for all of it (:func:`classify`, the one decision tree of both
   geometries): sphere, prolate, oblate, discocyte, cylinder, gourd, chain, torus, genus-g,
-  starfish-k, nested, k vesicles, wrapping, no membrane; and from an axisymmetric run's
-  meridians also stomatocyte and pear.
+  starfish-k, nested, k vesicles, wrapping, no membrane, ellipsoid (a triaxial one: see
+  :func:`classify`); and from an axisymmetric run's meridians also stomatocyte and pear.
 """
 
 from __future__ import annotations
@@ -254,7 +254,11 @@ def classify(d: dict) -> str:
     axisymmetric run's meridians (:func:`fem_ade.analysis.axishape.describe_meridians`):
     the one decision tree of both geometries (the module docstring). What only the meridians
     can tell — an invaginated pole (``pole_depths``: a stomatocyte) and the skewness along
-    the axis (a pear) — is asked where the descriptors hold it."""
+    the axis (a pear) — is asked where the descriptors hold it; and what only a 3D body
+    can be — triaxial: elongated (a₁/a₂ > :data:`PROLATE`, up to :data:`CYLINDER`) and
+    flat (a₃/a₂ < :data:`OBLATE`) with the symmetry D2h of an ellipsoid with three
+    different axes (so no axisymmetric axis: ``body["symmetry"]``) — is ``ellipsoid``
+    where it would otherwise be prolate."""
     nc = d["components"]
     if nc == 0:
         return "no membrane"
@@ -284,6 +288,8 @@ def classify(d: dict) -> str:
     if body["elongation"] > PROLATE:
         if body["elongation"] > CYLINDER:
             return "cylinder"
+        if body["flatness"] < OBLATE and symmetry_group(d) == "D2h":
+            return "ellipsoid"
         return "pear" if abs(body.get("skewness", 0.0)) > PEAR else "prolate"
     if body["flatness"] < OBLATE:
         return "discocyte" if body["dimple"] > DIMPLE else "oblate"
