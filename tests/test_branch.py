@@ -412,11 +412,13 @@ def test_stability_equals_a_dense_eigensolve(branch):
 
 def test_a_branch_ends_at_a_change_of_topology_not_of_label():
     """A genus-0 shape whose label changes (pear → gourd, discocyte → stomatocyte, gourd →
-    chain) is the same branch; opening into a torus or pinching into two vesicles ends it."""
+    chain, prolate → a triaxial ellipsoid) is the same branch; opening into a torus or
+    pinching into two vesicles ends it."""
     from fem_ade.campaigns.branch_analysis import same_topology
 
     for a, b in (("pear", "gourd"), ("discocyte", "stomatocyte"), ("gourd", "chain"),
-                 ("prolate", "cylinder"), ("torus", "torus"), ("2 vesicles", "2 vesicles")):
+                 ("prolate", "cylinder"), ("prolate", "ellipsoid"), ("torus", "torus"),
+                 ("2 vesicles", "2 vesicles")):
         assert same_topology(a, b), (a, b)
     for a, b in (("oblate", "torus"), ("pear", "2 vesicles"), ("stomatocyte", "nested"),
                  ("2 vesicles", "gourd")):

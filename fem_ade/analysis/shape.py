@@ -34,10 +34,15 @@ Descriptors
   ``elongation`` a₁/a₂ and ``flatness`` a₃/a₂, the ``necks`` along the long axis (minima of
   the cross-section area below 85 % of the smaller maximum beside them) and the ``dimple``
   1 − (thickness at the centre)/(largest thickness) across the short axis (> 0: biconcave).
+  In 3D also its ``symmetry`` (:func:`fem_ade.analysis.symmetry.symmetry`): which rotations
+  about the principal axes (m-fold, m ≤ 8, or axisymmetric) and which mirror planes map φ
+  onto itself within :data:`~fem_ade.analysis.symmetry.SYMMETRY_TOL`, and the Schoenflies
+  ``group`` they make (Kh for a sphere, D∞h for a prolate or oblate, C∞v for a pear, D2h
+  for a triaxial ellipsoid, D3h/D4h for a flat three-/four-armed starfish, …).
 * ``label``: a name for all of it (:func:`classify`, the one decision tree of both
   geometries): sphere, prolate, oblate, discocyte, cylinder, gourd, chain, torus, genus-g,
-  starfish-k, nested, k vesicles, wrapping, no membrane; and from an axisymmetric run's
-  meridians also stomatocyte and pear.
+  starfish-k, nested, k vesicles, wrapping, no membrane, ellipsoid (a triaxial one: see
+  :func:`classify`); and from an axisymmetric run's meridians also stomatocyte and pear.
 """
 
 from __future__ import annotations
@@ -45,7 +50,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import ndimage
 
 from fem_ade.analysis.surface import (
     Surface,
@@ -56,6 +60,7 @@ from fem_ade.analysis.surface import (
     signed_volume,
     winding_number,
 )
+from fem_ade.analysis.symmetry import Frame, principal_frame, symmetry
 from fem_ade.model.params import reduced_area_difference, reduced_volume
 
 #: summary.json → shape: the descriptors of the sharp surface kept at its top level
@@ -80,7 +85,8 @@ def describe(phi: np.ndarray, L: float, *, V: float | None = None, A: float | No
     component enclosing it, or None), ``wraps`` (per component: it winds around the
     periodic box), ``reduced_volume``, ``reduced_area_difference``, ``arms`` (int, lobes of
     the largest component, 1 = no arms; 0 if there is no surface or it wraps),
-    ``arms_per_component``, ``area_per_component``, ``sources`` and ``sharp`` (V, A,
+    ``arms_per_component``, ``area_per_component``, ``body`` (:func:`body_geometry` and its
+    ``symmetry``, None without a finite body), ``label``, ``sources`` and ``sharp`` (V, A,
     mean_curvature_integral, reduced_volume, reduced_area_difference of the extracted
     surface), and ``shift`` (the grid roll used to centre the surface).
     """
@@ -166,7 +172,10 @@ def _nesting(S: Surface, areas: list[float]) -> list[int | None]:
 
 
 def _with_label(S, nc, genus, inside_of, arms) -> dict:
-    body = body_geometry(S) if nc else None
+    frame = principal_frame(S) if nc else None
+    body = body_geometry(S, frame) if frame is not None else None
+    if body is not None:
+        body["symmetry"] = symmetry(S, frame=frame)
     first = (arms[0] if arms[0] is not None else 0) if nc else 0
     d = {"components": nc, "genus": genus, "nested": any(k is not None for k in inside_of),
          "arms": first, "body": body}
@@ -208,26 +217,15 @@ def count_necks(area: np.ndarray) -> tuple[int, float]:
     return necks, worst
 
 
-def body_geometry(S: Surface) -> dict | None:
+def body_geometry(S: Surface, frame: Frame | None = None) -> dict | None:
     """Principal semi-axes, necks and dimple of the largest region {φ > 0} (None if there is
-    none, or it winds around the periodic box). See the module docstring."""
-    region = S.phi > 0
-    labels, count = ndimage.label(region)
-    if count == 0:
+    none, or it winds around the periodic box), in its :func:`principal_frame` (``frame``:
+    a precomputed one). See the module docstring."""
+    F = frame if frame is not None else principal_frame(S)
+    if F is None:
         return None
-    sizes = np.bincount(labels.ravel())[1:]
-    mask = labels == 1 + int(np.argmax(sizes))
-    idx = np.argwhere(mask)
-    if any(idx[:, a].min() == 0 and idx[:, a].max() == S.phi.shape[a] - 1 for a in range(3)):
-        return None  # it spans an axis of the box: no finite body to measure
-    if len(idx) < 27:
-        return None  # a few grid cells: too small to measure
-    X = S.origin + idx * S.h
-    c = X.mean(axis=0)
-    Y = X - c
-    lam, vec = np.linalg.eigh(Y.T @ Y / len(Y))
-    lam, vec = lam[::-1], vec[:, ::-1]  # a₁ ≥ a₂ ≥ a₃
-    axes = np.sqrt(5.0 * np.maximum(lam, 0.0))
+    c, vec, axes = F.centre, F.axes, F.semi_axes
+    Y = F.points - c
     h = float(S.h.min())
     cell = float(np.prod(S.h))
     # cross-section area along the long axis
@@ -256,7 +254,11 @@ def classify(d: dict) -> str:
     axisymmetric run's meridians (:func:`fem_ade.analysis.axishape.describe_meridians`):
     the one decision tree of both geometries (the module docstring). What only the meridians
     can tell — an invaginated pole (``pole_depths``: a stomatocyte) and the skewness along
-    the axis (a pear) — is asked where the descriptors hold it."""
+    the axis (a pear) — is asked where the descriptors hold it; and what only a 3D body
+    can be — triaxial: elongated (a₁/a₂ > :data:`PROLATE`, up to :data:`CYLINDER`) and
+    flat (a₃/a₂ < :data:`OBLATE`) with the symmetry D2h of an ellipsoid with three
+    different axes (so no axisymmetric axis: ``body["symmetry"]``) — is ``ellipsoid``
+    where it would otherwise be prolate."""
     nc = d["components"]
     if nc == 0:
         return "no membrane"
@@ -286,18 +288,30 @@ def classify(d: dict) -> str:
     if body["elongation"] > PROLATE:
         if body["elongation"] > CYLINDER:
             return "cylinder"
+        if body["flatness"] < OBLATE and symmetry_group(d) == "D2h":
+            return "ellipsoid"
         return "pear" if abs(body.get("skewness", 0.0)) > PEAR else "prolate"
     if body["flatness"] < OBLATE:
         return "discocyte" if body["dimple"] > DIMPLE else "oblate"
     return "sphere"
 
 
+def symmetry_group(d: dict) -> str | None:
+    """The Schoenflies name of the body's symmetry in :func:`describe`'s result or in
+    summary.json's ``shape`` (None where there is none: no finite body, or an axisymmetric
+    run's descriptors)."""
+    return ((d.get("body") or {}).get("symmetry") or {}).get("group")
+
+
 def summary_line(d: dict, given: str = "given V, A, ΔA") -> str:
-    """A one-line human summary of :func:`describe`'s result (sharp values always shown)."""
+    """A one-line human summary of :func:`describe`'s result (sharp values always shown;
+    the body's symmetry group where there is one)."""
     nc = d["components"]
     g = ", ".join(str(x) for x in d["genus"]) or "-"
+    group = symmetry_group(d)
     head = (f"{nc} component{'s' if nc != 1 else ''}, genus {g}"
-            f"{', nested' if d['nested'] else ''}, arms = {d['arms']}")
+            f"{', nested' if d['nested'] else ''}, arms = {d['arms']}"
+            f"{f', symmetry {group}' if group else ''}")
     sharp = d["sharp"]
     sharp_part = (f"v = {sharp['reduced_volume']:.3f}, Δa = "
                   f"{sharp['reduced_area_difference']:.3f} (sharp surface)")

@@ -104,13 +104,14 @@ def branch_of_label(label):
 def same_topology(first, label) -> bool:
     """Whether a point's shape has its branch's topology: one body of genus 0 (whatever its
     label: a prolate that grows a second waist, a pear whose label flips to gourd, an oblate
-    whose dimples deepen into a stomatocyte are each still one branch), a torus, or the same
-    label otherwise (two vesicles, nested)."""
+    whose dimples deepen into a stomatocyte, a prolate that turns triaxial (``ellipsoid``)
+    are each still one branch), a torus, or the same label otherwise (two vesicles,
+    nested)."""
     def kind(text):
         if text == "torus":
             return "torus"
         genus0 = branch_of_label(text) in ("prolate", "oblate", "stomatocyte", "pear")
-        return "one body of genus 0" if genus0 or text == "sphere" else text
+        return "one body of genus 0" if genus0 or text in ("sphere", "ellipsoid") else text
 
     return kind(first) == kind(label)
 

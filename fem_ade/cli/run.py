@@ -490,6 +490,7 @@ def backend_options(args) -> dict:
 
 
 def _report(scene, backend: str, result, out) -> int:
+    from fem_ade.analysis.shape import symmetry_group
     from fem_ade.engine.execute import verdict
 
     f, p = result.final, scene.params
@@ -506,8 +507,10 @@ def _report(scene, backend: str, result, out) -> int:
     if result.shape is not None:
         d = result.shape
         genus = ", ".join(map(str, d["genus"])) or "-"
+        group = symmetry_group(d)
         print(f"  shape: {d['label']}: {d['components']} component(s), genus {genus}"
-              f"{', nested' if d['nested'] else ''}, arms {d['arms']}, reduced volume "
+              f"{', nested' if d['nested'] else ''}, arms {d['arms']}"
+              f"{f', symmetry {group}' if group else ''}, reduced volume "
               f"{d['reduced_volume']:.3f}, reduced area difference "
               f"{d['reduced_area_difference']:.3f} (sharp surface)")
         v = verdict(scene, d)

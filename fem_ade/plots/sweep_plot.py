@@ -19,7 +19,8 @@ from fem_ade.store.status import HAS_RESULT
 
 COLOURS = {"sphere": "#7f7f7f", "prolate": "#1f77b4", "cylinder": "#6baed6",
            "gourd": "#9ecae1", "chain": "#c6dbef", "oblate": "#ff7f0e", "discocyte": "#fdae6b",
-           "torus": "#9467bd", "pear": "#d62728", "stomatocyte": "#2ca02c"}
+           "torus": "#9467bd", "pear": "#d62728", "stomatocyte": "#2ca02c",
+           "ellipsoid": "#17becf"}
 MARKERS = "osD^v<>ph"
 
 
