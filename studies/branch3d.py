@@ -70,7 +70,8 @@ def case(root: Path, c: tuple) -> dict:
     rows = follow_switched(oblate, 0, folder, points=points, n=n, order=order,
                            stability=True, quiet=True)
     ob = branch_rows(oblate)
-    keep = ("v", "e", "amplitude", "label", "semi_axes", "eigenvalues", "unstable_3d",
+    _symmetries(oblate, folder, rows, n, order)
+    keep = ("v", "e", "amplitude", "label", "symmetry", "semi_axes", "eigenvalues", "unstable_3d",
             "newton", "newton_s", "seconds")
     out_rows = [{**{k: r.get(k) for k in keep}, "e_oblate": _interpolated(ob, r["v"]),
                  "e_prolate": _interpolated(pro, r["v"])} for r in rows]
@@ -79,6 +80,25 @@ def case(root: Path, c: tuple) -> dict:
             "v_bifurcation": bif["v"], "rows": out_rows, "ended": ended,
             "oblate": [(float(r["v"]), float(r["e"])) for r in ob],
             "prolate": [(float(r["v"]), float(r["e"])) for r in pro]}
+
+
+def _symmetries(oblate: Path, folder: Path, rows: list[dict], n: int, order: int) -> None:
+    """Each row's symmetry group where its point was saved without one (by a version of
+    follow_switched before it measured it): measured on the point's field."""
+    import numpy as np
+
+    from fem_ade.analysis.symmetry import symmetry
+    from fem_ade.campaigns.switch_branch import _start
+
+    missing = [k for k, r in enumerate(rows) if "symmetry" not in r]
+    if not missing:
+        return
+    _, be, _ = _start(oblate, 0, None, None, n, order)
+    for k in missing:
+        with np.load(folder / "points" / f"{k:04d}" / "final.npz") as z:
+            be._set(np.array(z["phi"]), None)
+        found = symmetry(be.grid_phi(), be.params.L)
+        rows[k] = {**rows[k], "symmetry": None if found is None else found["group"]}
 
 
 def shapes(root: Path, c: dict, out: Path) -> Path | None:
@@ -170,8 +190,8 @@ def report(result: dict, out: Path, suffix: str) -> None:
                   f"{c['ended']}. A point's Newton: median {secs[len(secs) // 2]:.1f} s "
                   f"(wall, one thread), its 3D stability median {stab[len(stab) // 2]:.1f} s.",
                   "", "| point | v | amplitude | e | e − e_oblate | e − e_prolate | label | "
-                  "semi-axes | lowest 3D λ | unstable in 3D | Newton | s |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "symmetry | semi-axes | lowest 3D λ | unstable in 3D | Newton | s |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
         def diff(x, r):
             return "—" if x is None else f"{r['e'] - x:+.4f}"
@@ -181,7 +201,8 @@ def report(result: dict, out: Path, suffix: str) -> None:
             lam = ", ".join(f"{x:.3g}" for x in r["eigenvalues"][:2])
             lines.append(f"| {k} | {r['v']:.5f} | {r['amplitude']:.3f} | {r['e']:.5f} | "
                          f"{diff(r['e_oblate'], r)} | {diff(r['e_prolate'], r)} | "
-                         f"{r['label']} | ({axes}) | {lam} | {r['unstable_3d']} | "
+                         f"{r['label']} | {r.get('symmetry') or '—'} | ({axes}) | {lam} | "
+                         f"{r['unstable_3d']} | "
                          f"{r['newton']} | {r['seconds']:.0f} |")
     lines += ["", f"![e and the semi-axes against v](branch3d{suffix}.png)"]
     if (out / "branch3d-shapes.png").is_file() and not suffix:

@@ -65,9 +65,12 @@ STEP = 0.1
 #: a point whose mode amplitude is below this (relative to the branch's largest) has come
 #: back to an axisymmetric state: the branch ends there
 REJOINED = 0.02
+#: the symmetry groups of a body of revolution (:func:`fem_ade.analysis.symmetry.symmetry`):
+#: a branch point that has one has rejoined an axisymmetric branch
+AXISYMMETRIC = ("D∞h", "C∞v", "Kh")
 #: the eigenvalues of each point's 3D stability (with ``stability``)
 EIGENVALUES = 4
-COLUMNS = ("point", "v", "e", "E", "amplitude", "label", "semi_axes", "unstable_3d",
+COLUMNS = ("point", "v", "e", "E", "amplitude", "label", "symmetry", "semi_axes", "unstable_3d",
            "eigenvalues", "newton", "seconds", "s")
 
 
@@ -143,8 +146,7 @@ def _row(be, cont, psi, phi0, newton: int, t0: float, stability: bool) -> dict:
                 "label": (shape or {}).get("label"),
                 "semi_axes": [round(a, 6) for a in body.get("semi_axes", [])] or None,
                 "newton_s": round(t1 - t0, 2), "seconds": round(time.perf_counter() - t0, 2)})
-    if shape and "symmetry" in shape:
-        row["symmetry"] = shape["symmetry"]
+    row["symmetry"] = (body.get("symmetry") or {}).get("group")
     return row
 
 
@@ -279,9 +281,9 @@ def _advance(cont, done: list, anchor: tuple, psi, step: float, ds: float):
 
 
 def _ended(rows: list[dict]) -> str | None:
-    """Why the branch ends at its last point: a topology change, or back at an axisymmetric
-    state (the mode's amplitude below :data:`REJOINED` of its largest); None where it goes
-    on."""
+    """Why the branch ends at its last point: a topology change, or at an axisymmetric
+    state — the one it left (the mode's amplitude below :data:`REJOINED` of its largest) or
+    another (its symmetry one of :data:`AXISYMMETRIC`); None where it goes on."""
     from fem_ade.campaigns.branch_analysis import same_topology
 
     row = rows[-1]
@@ -291,6 +293,9 @@ def _ended(rows: list[dict]) -> str | None:
     if len(rows) > 2 and abs(row["amplitude"]) < REJOINED * largest:
         return (f"the branch rejoins an axisymmetric one at v = {row['v']:.6g} (its mode's "
                 f"amplitude {row['amplitude']:.3g})")
+    if len(rows) > 2 and row.get("symmetry") in AXISYMMETRIC:
+        return (f"the branch reaches an axisymmetric shape ({row['symmetry']}, about another "
+                f"axis) at v = {row['v']:.6g}")
     return None
 
 
