@@ -9,10 +9,12 @@ the prolate, and so that this branch is no minimum near the oblate; where it goe
 not say. Hypothesis (Heinrich, Svetina & Žekš 1993: the non-axisymmetric shapes between the
 oblate and the prolate are unstable): the branch is subcritical (it exists for v < v_c, on
 the oblate's stable side), a saddle with one unstable direction, its e above the oblate's
-and the prolate's at the same v. Test: the branch followed by 3D continuation (64³ nodes of
-order 8, 2.56 per ε, where the blocks equal the 3D spectrum: ``switch.md``) from the
+and the prolate's at the same v. Test: the branch followed by 3D continuation from the
 bifurcation, each point's 3D stability (the rigid motions out), its e beside the oblate's
-and the prolate's axisymmetric branches at the same v, ε and R₀, and its semi-axes.
+and the prolate's axisymmetric branches at the same v, ε and R₀, its semi-axes and its
+symmetry. Two cases: ε = 0.04 on 64³ nodes of order 8 (2.56 per ε, where the blocks equal
+the 3D spectrum: ``switch.md``), up to 40 points; ε = 0.02 on 96³ nodes of order 8 (1.92
+per ε), 3 points (~14 min a point with its stability).
 
 Writes ``OUT/branch3d.md`` (with the hand-written ``OUT/branch3d_notes.md``), ``.json`` and
 ``branch3d.png`` (e and the semi-axes against v); the full run also ``branch3d-shapes.png``
@@ -20,7 +22,7 @@ Writes ``OUT/branch3d.md`` (with the hand-written ``OUT/branch3d_notes.md``), ``
 measurement: each point's Newton and stability seconds, one point after another in one
 process.
 
-    python studies/branch3d.py --out studies/results     # ~40 min on one core
+    python studies/branch3d.py --out studies/results     # ~1.5 h on one core
     python studies/branch3d.py --quick                   # 32³ nodes, 3 points, ~1 min
 """
 
@@ -40,7 +42,8 @@ OUT = Path("runs") / "studies"
 #: (name, ε, R₀, the oblate branch's v from, to, step, the 3D mesh's nodes and order, the
 #: points of the 3D branch, the prolate's branch beside it: v from, to (None: none — the
 #: quick case's R₀ = 0.25 prolate does not fit the box))
-CASES = (("eps=0.04", 0.04, 0.2, 0.9, 0.74, 0.02, 64, 8, 40, (0.9, 0.6)),)
+CASES = (("eps=0.04", 0.04, 0.2, 0.9, 0.74, 0.02, 64, 8, 40, (0.9, 0.6)),
+         ("eps=0.02", 0.02, 0.2, 0.9, 0.74, 0.02, 96, 8, 3, (0.9, 0.6)))
 QUICK_CASES = (("eps=0.04", 0.04, 0.25, 0.85, 0.80, 0.01, 32, 8, 3, None),)
 
 
@@ -118,17 +121,18 @@ def shapes(root: Path, c: dict, out: Path) -> Path | None:
     rows = c["rows"]
     picks = sorted({0, len(rows) // 2, len(rows) - 1})
     _, be, _ = _start(root / f"oblate-{c['name']}", 0, None, None, c["n"], c["order"])
-    fig, axes = plt.subplots(1, len(picks), figsize=(3.2 * len(picks), 3.4))
+    fig, axes = plt.subplots(len(picks), 1, figsize=(10, 5 * len(picks)))
     for ax, k in zip(np.atleast_1d(axes), picks, strict=True):
         with np.load(folder / "points" / f"{k:04d}" / "final.npz") as z:
             be._set(np.array(z["phi"]), None)
+        r = rows[k]
         png = root / f"shape-{k:04d}.png"
-        render_shape(be.grid_phi(), be.params.L, png, title="")
+        render_shape(be.grid_phi(), be.params.L, png,
+                     title=f"point {k}: v = {r['v']:.4f}, e = {r['e']:.4f}, "
+                           f"{r['unstable_3d']} unstable in 3D")
         ax.imshow(plt.imread(png))
         ax.set_axis_off()
-        r = rows[k]
-        ax.set_title(f"v = {r['v']:.4f}, e = {r['e']:.4f}\n{r['unstable_3d']} unstable in 3D",
-                     fontsize=9)
+    fig.subplots_adjust(left=0, right=1, top=1, bottom=0, hspace=0.02)
     path = out / "branch3d-shapes.png"
     save_figure(fig, path)
     plt.close(fig)

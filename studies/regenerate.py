@@ -44,6 +44,7 @@ STEPS = (
     ("solver_bench", ["studies/solver_bench.py", "--out", RESULTS]),
     ("switch", ["studies/switch.py", "--out", RESULTS]),
     ("branch3d", ["studies/branch3d.py", "--out", RESULTS]),
+    ("starfish", ["studies/starfish.py", "--out", RESULTS]),
     ("newton3d_bench", ["studies/newton3d_bench.py", "--out", RESULTS]),
     ("nonaxisymmetric", ["studies/nonaxisymmetric.py", "--out", RESULTS, "--eps", "0.02"]),
     ("sweep_scaling", ["studies/sweep_scaling.py", "--out", RESULTS]),
@@ -87,6 +88,8 @@ MEASUREMENTS = {"convergence": "errors and times of each resolution, in one proc
                           "one process",
                 "branch3d": "a 3D branch's points, each its Newton and stability seconds, "
                             "one after another in one process",
+                "starfish": "a 3D run's CPU seconds, after its branches, one after another "
+                            "in one process",
                 "newton3d_bench": "one 3D steady state by Newton with and without its pins, "
                                   "CPU seconds in one process",
                 "ade_azimuthal": "one point per cell of the ADE plane and its modes, in a "

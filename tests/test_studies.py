@@ -429,6 +429,19 @@ def check_branch3d(result, out):
     assert (out / "branch3d_quick.md").is_file() and (out / "branch3d_quick.png").is_file()
 
 
+def check_starfish(result, out):
+    """At ε = 0.02, v = 0.5 between Δa₀ = 1.35 and 1.46: the discocyte's block m = 3 turns
+    unstable (a window opens; measured at 1.41 on the full line), the other blocks m ≥ 2
+    stay stable, the report and figure written."""
+    (x,) = result["lines"]
+    assert x["failed"] is None and result["switch"] is None
+    w = _load(STUDIES / "starfish.py").windows(x)
+    assert list(w) == [3], w
+    ((lo, hi),) = w[3]
+    assert 1.38 < lo < 1.44 and hi is None
+    assert (out / "starfish_quick.md").is_file() and (out / "starfish_quick.png").is_file()
+
+
 ARGS = {"readme_figure": ["--steps", "2", "--n", "24"]}
 #: where each study writes by default (under the current directory)
 DEFAULT_OUT = {"gallery": "runs/gallery", "readme_figure": "runs/readme"}
@@ -554,7 +567,7 @@ def test_package_verdicts_are_the_committed_gallerys():
 REPORTS = {"constraints_study": [], "sharp_limit": [], "gallery": [], "ade_plane": [],
            "axisymmetric": [], "nonaxisymmetric": ["--eps", "0.02"], "eps_ladder": [],
            "phase_diagram": [], "branches": [], "ade_branches": [], "azimuthal": [],
-           "ade_azimuthal": [], "branch3d": []}
+           "ade_azimuthal": [], "branch3d": [], "starfish": []}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)

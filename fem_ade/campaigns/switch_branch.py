@@ -186,9 +186,9 @@ def follow_switched(branch: str | Path, index: int | None, out: str | Path, *,
         anchor = (phi0, cont.p)
         done = load_points(out, tag, phi0.size, "v")
         rows = [r for r, _ in done]
-        why = None
+        why = _ended(rows) if rows else None  # a branch that ended stays ended
         ds = rows[-1]["ds_next"] if rows else step
-        while len(rows) < points:
+        while why is None and len(rows) < points:
             t0 = time.perf_counter()
             corrected, used = _advance(cont, done, anchor, psi, step, ds)
             if corrected is None:
