@@ -17,10 +17,10 @@ the 3D spectrum: ``switch.md``), up to 40 points; ε = 0.02 on 96³ nodes of ord
 per ε), 3 points (~14 min a point with its stability).
 
 Writes ``OUT/branch3d.md`` (with the hand-written ``OUT/branch3d_notes.md``), ``.json`` and
-``branch3d.png`` (e and the semi-axes against v); the full run also ``branch3d-shapes.png``
-(three of its points); the branch folders in ``OUT/branch3d/`` (not committed). A
-measurement: each point's Newton and stability seconds, one point after another in one
-process.
+``branch3d.png`` (e and the semi-axes against v); the full run also
+``branch3d-shapes-CASE.png`` (three points of each branch); the branch folders in
+``OUT/branch3d/`` (not committed). A measurement: each point's Newton and stability
+seconds, one point after another in one process.
 
     python studies/branch3d.py --out studies/results     # ~1.5 h on one core
     python studies/branch3d.py --quick                   # 32³ nodes, 3 points, ~1 min
@@ -91,12 +91,12 @@ def _symmetries(oblate: Path, folder: Path, rows: list[dict], n: int, order: int
     import numpy as np
 
     from fem_ade.analysis.symmetry import symmetry
-    from fem_ade.campaigns.switch_branch import _start
+    from fem_ade.campaigns.switch_branch import switched_start
 
     missing = [k for k, r in enumerate(rows) if "symmetry" not in r]
     if not missing:
         return
-    _, be, _ = _start(oblate, 0, None, None, n, order)
+    _, be, _ = switched_start(oblate, 0, None, None, n, order)
     for k in missing:
         with np.load(folder / "points" / f"{k:04d}" / "final.npz") as z:
             be._set(np.array(z["phi"]), None)
@@ -113,27 +113,28 @@ def shapes(root: Path, c: dict, out: Path) -> Path | None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from fem_ade.campaigns.switch_branch import _start
+    from fem_ade.campaigns.switch_branch import switched_start
     from fem_ade.plots.figures import save_figure
     from fem_ade.plots.shapes import render_shape
 
     folder = root / f"d2-{c['name']}"
     rows = c["rows"]
     picks = sorted({0, len(rows) // 2, len(rows) - 1})
-    _, be, _ = _start(root / f"oblate-{c['name']}", 0, None, None, c["n"], c["order"])
+    _, be, _ = switched_start(root / f"oblate-{c['name']}", 0, None, None, c["n"],
+                              c["order"])
     fig, axes = plt.subplots(len(picks), 1, figsize=(10, 5 * len(picks)))
     for ax, k in zip(np.atleast_1d(axes), picks, strict=True):
         with np.load(folder / "points" / f"{k:04d}" / "final.npz") as z:
             be._set(np.array(z["phi"]), None)
         r = rows[k]
-        png = root / f"shape-{k:04d}.png"
+        png = folder / f"shape-{k:04d}.png"
         render_shape(be.grid_phi(), be.params.L, png,
                      title=f"point {k}: v = {r['v']:.4f}, e = {r['e']:.4f}, "
                            f"{r['unstable_3d']} unstable in 3D")
         ax.imshow(plt.imread(png))
         ax.set_axis_off()
     fig.subplots_adjust(left=0, right=1, top=1, bottom=0, hspace=0.02)
-    path = out / "branch3d-shapes.png"
+    path = out / f"branch3d-shapes-{c['name']}.png"
     save_figure(fig, path)
     plt.close(fig)
     return path
@@ -209,8 +210,10 @@ def report(result: dict, out: Path, suffix: str) -> None:
                          f"{r['unstable_3d']} | "
                          f"{r['newton']} | {r['seconds']:.0f} |")
     lines += ["", f"![e and the semi-axes against v](branch3d{suffix}.png)"]
-    if (out / "branch3d-shapes.png").is_file() and not suffix:
-        lines += ["", "![three points of the branch](branch3d-shapes.png)"]
+    for c in result["cases"]:
+        shapes_png = f"branch3d-shapes-{c['name']}.png"
+        if (out / shapes_png).is_file() and not suffix:
+            lines += ["", f"![three points of the branch at {c['name']}]({shapes_png})"]
     notes = out / f"branch3d{suffix}_notes.md"
     if notes.is_file():
         lines += ["", notes.read_text().rstrip()]

@@ -11,20 +11,20 @@ those instabilities exactly:
   v = 0.5 and 0.7, at ε = 0.02 and 0.01, with blocks m ≤ 6 at each point. A window of an m
   is the range of Δa₀ where block m is unstable; its lower end is where an m-armed branch is
   born (bifurcations.json).
-- **Where it leads.** From the ε = 0.02, v = 0.5 line, at the point where block m = 3 is
-  most unstable, the 3D flow from φ + 0.1 ψ₃ cos 3(θ − π/12) (``fem_ade.switch --point I
-  --mode 3``, 64³ nodes of order 4). Its end: label, genus, arms, symmetry, and e beside the
-  discocyte's.
+- **Where it leads.** From the v = 0.5 lines (ε = 0.02 and 0.01), at the point where block
+  m = 3 is most unstable, the 3D flow from φ + 0.1 ψ₃ cos 3(θ − π/12) (``fem_ade.switch
+  --point I --mode 3``, 64³ and 128³ nodes of order 4). Its end: label, genus, arms,
+  symmetry, and e beside the discocyte's.
 
 Hypothesis: the m-fold windows open one after another as Δa₀ grows (m = 2, 3, 4, …), and
 the m = 3 instability leads to a 3-armed starfish.
 
 Writes ``OUT/starfish.md`` (with the hand-written ``OUT/starfish_notes.md``), ``.json`` and
 ``starfish.png`` (each line's lowest eigenvalue per block against Δa₀); the full run also
-``starfish-switch.png`` (the 3D end). The branch and run folders go in ``OUT/starfish/``
+``starfish-switch-eps=E.png`` (the 3D ends). The branch and run folders go in ``OUT/starfish/``
 (not committed).
 
-    python studies/starfish.py --out studies/results     # ~20 min on one core
+    python studies/starfish.py --out studies/results     # ~1.5 h on one core
     python studies/starfish.py --quick                   # one short line at ε = 0.02, ~1 min
 """
 
@@ -46,8 +46,8 @@ KBAR, R0, MODES = 1.4, 0.2, 6
 LINES = ((0.5, 0.02, 1.0, 1.8, 0.05), (0.5, 0.01, 1.0, 1.8, 0.05),
          (0.7, 0.02, 1.0, 1.8, 0.05), (0.7, 0.01, 1.0, 1.8, 0.05))
 QUICK_LINES = ((0.5, 0.02, 1.35, 1.46, 0.05),)
-#: the switch: (the line's v and ε, the mode)
-SWITCH = (0.5, 0.02, 3)
+#: the switches: (the line's v and ε, the mode); 64³ and 128³ nodes of order 4 (1.28 per ε)
+SWITCHES = ((0.5, 0.02, 3), (0.5, 0.01, 3))
 
 
 def _name(v: float, eps: float) -> str:
@@ -92,12 +92,12 @@ def windows(result_line: dict) -> dict[int, list[tuple[float | None, float | Non
     return {m: [tuple(s) for s in spans] for m, spans in sorted(found.items())}
 
 
-def switch_case(root: Path, lines: list[dict], out: Path) -> dict | None:
-    """The 3D flow from the line's point most unstable in block m."""
+def switch_case(root: Path, lines: list[dict], out: Path, v: float, eps: float,
+                m: int) -> dict | None:
+    """The 3D flow from the line (v, ε)'s point most unstable in block m."""
     from fem_ade.analysis.sharp import reduced_energy
     from fem_ade.campaigns.switch import switch
 
-    v, eps, m = SWITCH
     chosen = next((x for x in lines if (x["v"], x["eps"]) == (v, eps) and not x["failed"]),
                   None)
     if chosen is None:
@@ -106,12 +106,13 @@ def switch_case(root: Path, lines: list[dict], out: Path) -> dict | None:
     point = chosen["points"][k]
     if point["lowest"][m] >= 0:
         return None
-    run = root / f"switched-m{m}"
+    run = root / (f"switched-m{m}" if eps == 0.02 else f"switched-m{m}-eps={eps:g}")
     if not (run / "summary.json").is_file():
         switch(root / _name(v, eps), None, run, point=k, mode=m, quiet=True)
     s = json.loads((run / "summary.json").read_text())
+    picture = f"starfish-switch-eps={eps:g}.png"
     if (run / "shape.png").is_file():
-        shutil.copy(run / "shape.png", out / "starfish-switch.png")
+        shutil.copy(run / "shape.png", out / picture)
     shape = s["shape"]
     body = shape.get("body") or {}
     return {"v": v, "eps": eps, "m": m, "point": k, "da0": point["da0"],
@@ -120,7 +121,8 @@ def switch_case(root: Path, lines: list[dict], out: Path) -> dict | None:
             "genus": shape["genus"], "arms": shape["arms"],
             "symmetry": (body.get("symmetry") or {}).get("group"),
             "semi_axes": body.get("semi_axes"), "e": reduced_energy(s["final"]),
-            "cpu_s": round(s["cpu_s"], 1)}
+            "cpu_s": round(s["cpu_s"], 1), "n": s.get("backend_info", {}).get("n"),
+            "picture": picture}
 
 
 def figure(result: dict, out: Path, suffix: str) -> Path:
@@ -175,18 +177,20 @@ def report(result: dict, out: Path, suffix: str) -> None:
                  range(2, MODES + 1)]
         lines.append(f"| {x['v']:g} | {x['eps']:g} | Δa₀ = {last:.3f} "
                      f"({x['points'][-1]['label']}) | " + " | ".join(cells) + " |")
-    s = result.get("switch")
-    if s:
+    for s in result.get("switches") or []:
         axes = ", ".join(f"{a:.4f}" for a in s["semi_axes"] or [])
+        genus = ", ".join(str(g) for g in s["genus"])
         lines += ["", f"**Where m = {s['m']} leads** (v = {s['v']:g}, ε = {s['eps']:g}, from "
                   f"point {s['point']}, Δa₀ = {s['da0']:.4f}, block m = {s['m']} at "
-                  f"{s['eigenvalue']:.3g}; 64³ nodes of order 4): {s['status']} after "
+                  f"{s['eigenvalue']:.3g}; 1.28 nodes per ε, order 4): {s['status']} after "
                   f"{s['steps']} steps ({s['cpu_s']:.0f} s CPU) — {s['label']}, genus "
-                  f"{s['genus']}, arms {s['arms']}, symmetry {s['symmetry']}, semi-axes "
+                  f"{genus}, arms {s['arms']}, symmetry {s['symmetry']}, semi-axes "
                   f"({axes}); e = {s['e']:.4f} against the discocyte's {s['discocyte_e']:.4f}."]
     lines += ["", f"![the blocks' lowest eigenvalues along the lines](starfish{suffix}.png)"]
-    if s and not suffix and (out / "starfish-switch.png").is_file():
-        lines += ["", "![where m = 3 leads in 3D](starfish-switch.png)"]
+    for s in result.get("switches") or []:
+        if not suffix and (out / s["picture"]).is_file():
+            lines += ["", f"![where m = {s['m']} leads in 3D at ε = {s['eps']:g}]"
+                      f"({s['picture']})"]
     notes = out / f"starfish{suffix}_notes.md"
     if notes.is_file():
         lines += ["", notes.read_text().rstrip()]
@@ -205,8 +209,9 @@ def main(argv=None) -> dict:
         root = args.out / f"starfish{suffix}"
         root.mkdir(parents=True, exist_ok=True)
         made = [line(root, *x) for x in (QUICK_LINES if args.quick else LINES)]
-        result = {"lines": made,
-                  "switch": None if args.quick else switch_case(root, made, args.out)}
+        switches = [] if args.quick else [switch_case(root, made, args.out, *c)
+                                          for c in SWITCHES]
+        result = {"lines": made, "switches": [c for c in switches if c is not None]}
         path.write_text(json.dumps(result, indent=1, allow_nan=False) + "\n")
     figure(result, args.out, suffix)
     report(result, args.out, suffix)

@@ -434,7 +434,7 @@ def check_starfish(result, out):
     unstable (a window opens; measured at 1.41 on the full line), the other blocks m ≥ 2
     stay stable, the report and figure written."""
     (x,) = result["lines"]
-    assert x["failed"] is None and result["switch"] is None
+    assert x["failed"] is None and result["switches"] == []
     w = _load(STUDIES / "starfish.py").windows(x)
     assert list(w) == [3], w
     ((lo, hi),) = w[3]

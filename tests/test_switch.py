@@ -186,7 +186,7 @@ def test_following_the_born_branch_in_3d(oblate, tmp_path, capsys):
     steady state; a second run goes on from the last point."""
     from fem_ade.campaigns.branch_folder import load_points, read_branch_table
     from fem_ade.campaigns.continuation import Continuation
-    from fem_ade.campaigns.switch_branch import _start
+    from fem_ade.campaigns.switch_branch import switched_start
 
     out = tmp_path / "d2"
     common = [str(oblate), "--follow", "2", "--n", "32", "--order", "8", "--quiet",
@@ -201,7 +201,7 @@ def test_following_the_born_branch_in_3d(oblate, tmp_path, capsys):
     assert rows[2]["amplitude"] > 0.2 and json.loads((out / "ended.json").read_text())[
         "points"] == 3
     assert (out / "branch3d.png").is_file()
-    _, be, psi = _start(oblate, 0, None, None, 32, 8)
+    _, be, psi = switched_start(oblate, 0, None, None, 32, 8)
     ax, ay = (float(a) for a in np.load(oblate / "points" / "0003" / "final.npz")["axis"])
     phi0 = be.phi.copy()
 

@@ -8,10 +8,11 @@ near-zero mode ψ_m(r, z) cos mθ, and the non-axisymmetric branch leaves it alo
 (a pitchfork: φ₀'s rotations by π/m turn one side of it into the other). Its first two points
 are solved at a fixed **amplitude** a of the mode, with v (the reduced volume, free):
 
-    F(φ, v) = 0,    ⟨ψ̂, φ − φ₀⟩ = a ⟨ψ̂, ψ̂⟩,     a = ``step``, 2·``step``,
+    F(φ, v) = 0,    ⟨ψ̂, φ − φ₀⟩ = a ⟨ψ̂, ψ̂⟩,     a = a₁ = ``step``, then 2a₁ (or a₁ + δ),
 
 ψ̂ = ψ_m cos mθ scaled to max |ψ̂| = 1: :meth:`fem_ade.campaigns.continuation.Continuation.
-advance` along the tangent (ψ̂, 0) from (φ₀, v₀). An axisymmetric state has no m-part, so
+advance` along the tangent (ψ̂, 0) from (φ₀, v₀) (:func:`_advance` says how the second
+is found where Newton does not converge). An axisymmetric state has no m-part, so
 this constraint cannot be met on the axisymmetric branch, whatever v: it picks the new
 branch. From there the branch is followed as the axisymmetric ones are (the secant, then the
 quadratic predictor; Newton's correction on the extended system; the step halved where it
@@ -79,8 +80,10 @@ def default_nodes(eps: float, L: float, order: int = ORDER) -> int:
     return order * math.ceil(NODES_PER_EPS * L / eps / order - 1e-9)
 
 
-def _start(branch, index, point, mode, n, order):
-    """(the bifurcation's record, the 3D backend at the revolved φ₀, ψ̂ on its nodes)."""
+def switched_start(branch, index, point, mode, n, order):
+    """(what the branch leaves: the branch, bifurcation, m, point, its eigenvalue and
+    v_bifurcation; the 3D FEM backend at the revolved φ₀ on ``n`` nodes of ``order``; ψ̂ on
+    its nodes, max |ψ̂| = 1): the start of :func:`follow_switched`."""
     from fem_ade.backends.base import make_backend
     from fem_ade.campaigns.switch import bifurcation, start_fields, unstable_point
     from fem_ade.scenes.catalogue import Scene
@@ -171,7 +174,7 @@ def follow_switched(branch: str | Path, index: int | None, out: str | Path, *,
     check_follow(points, step)
     say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
     out = check_out(out)
-    origin, be, psi = _start(branch, index, point, mode, n, order)
+    origin, be, psi = switched_start(branch, index, point, mode, n, order)
     identity = _identity(origin, be, step, order, stability)
     made = not out.exists()
     try:
@@ -254,7 +257,7 @@ def _add_point(out: Path, tag: str, cont, done: list, corrected, used: float, ba
     cont.set_p(p)
     rows = [r for r, _ in done]
     row = _row(cont.be, cont, base[1], base[0], its, t0, stability)
-    row["s"] = (rows[-1]["s"] + used) if len(rows) >= 2 else used
+    row["s"] = (rows[-1]["s"] + used) if rows else used
     if len(rows) >= 2:
         ds = min(used * 1.5, 4 * step) if its <= 4 else used
     row["ds_next"] = ds
@@ -265,15 +268,33 @@ def _add_point(out: Path, tag: str, cont, done: list, corrected, used: float, ba
 
 
 def _advance(cont, done: list, anchor: tuple, psi, step: float, ds: float):
-    """The next point of the branch past ``done`` (its (row, φ)): at the amplitudes step,
-    2·step along ψ̂ from the anchor (φ₀, v₀) for the first two, then one arclength step
-    ``ds`` by the predictor (:meth:`fem_ade.campaigns.continuation.Continuation.advance`)."""
-    if len(done) < 2:
+    """The next point of the branch past ``done`` (its (row, φ)): the first at the mode's
+    amplitude a₁ = ``step`` off the anchor (φ₀, v₀), the second at 2a₁ predicted from φ₀
+    or, where Newton does not converge from there, at a₁ + δ predicted from the first, δ =
+    ``step``/2 halved until it does (measured at ε = 0.02 on 96³ nodes: 2a₁ from φ₀ did not
+    converge, and :meth:`~fem_ade.campaigns.continuation.Continuation.advance`'s halving
+    landed on the first point again; on 32³ nodes of order 8 at ε = 0.04, a₁ + step from the
+    first point did not converge where 2a₁ from φ₀ did), then one arclength step ``ds`` by
+    the predictor (``advance``)."""
+    tangent = (psi / math.sqrt(cont.theta * cont.inner(psi, psi)), 0.0)
+    if not done:  # the amplitude ``step`` off the anchor
         cont.be._set(anchor[0], None)
         cont.set_p(anchor[1])
-        target = step * (len(done) + 1)
-        tangent = (psi / math.sqrt(cont.theta * cont.inner(psi, psi)), 0.0)
-        return cont.advance([anchor], tangent, target, target / 8)
+        return cont.advance([anchor], tangent, step, step / 8)
+    if len(done) == 1:  # the amplitude 2a₁ off the anchor, else a₁ + δ from point 0
+        row, phi1 = done[0]
+        twice = cont.correct(anchor[0] + 2 * step * tangent[0], anchor[1], anchor, tangent,
+                             2 * step)
+        if twice is not None:
+            return twice, step
+        delta = step / 2
+        while delta >= step / 8:
+            corrected = cont.correct(phi1 + delta * tangent[0], row["v"], anchor, tangent,
+                                     row["amplitude"] + delta)
+            if corrected is not None:
+                return corrected, delta
+            delta *= 0.5
+        return None, delta
     last_row, phi_k = done[-1]
     cont.be._set(phi_k, None)
     cont.set_p(last_row["v"])
@@ -283,7 +304,9 @@ def _advance(cont, done: list, anchor: tuple, psi, step: float, ds: float):
 def _ended(rows: list[dict]) -> str | None:
     """Why the branch ends at its last point: a topology change, or at an axisymmetric
     state — the one it left (the mode's amplitude below :data:`REJOINED` of its largest) or
-    another (its symmetry one of :data:`AXISYMMETRIC`); None where it goes on."""
+    another (its symmetry one of :data:`AXISYMMETRIC` after an earlier point's was not: the
+    first points, a small amplitude off the revolved state, may pass the symmetry's
+    tolerance); None where it goes on."""
     from fem_ade.campaigns.branch_analysis import same_topology
 
     row = rows[-1]
@@ -293,7 +316,9 @@ def _ended(rows: list[dict]) -> str | None:
     if len(rows) > 2 and abs(row["amplitude"]) < REJOINED * largest:
         return (f"the branch rejoins an axisymmetric one at v = {row['v']:.6g} (its mode's "
                 f"amplitude {row['amplitude']:.3g})")
-    if len(rows) > 2 and row.get("symmetry") in AXISYMMETRIC:
+    earlier = [r.get("symmetry") for r in rows[:-1]]
+    if row.get("symmetry") in AXISYMMETRIC and any(g and g not in AXISYMMETRIC
+                                                   for g in earlier):
         return (f"the branch reaches an axisymmetric shape ({row['symmetry']}, about another "
                 f"axis) at v = {row['v']:.6g}")
     return None
