@@ -1,11 +1,11 @@
-"""Where the model's starfish are born: the discocyte's rim modes m = 2 … 6 along Δa₀ at low
-v (κ̄/κ = 1.4), and where the m = 3 instability leads in 3D (issue 44: the paper's
-starfish).
+"""Are starfish born on the discocyte? Its azimuthal modes m = 2 … 6 along Δa₀ at low v
+(κ̄/κ = 1.4), where each unstable mode lives, and where the m = 3 instability leads in 3D
+(issue 44: the paper's starfish).
 
-Starfish vesicles (Wintz, Döbereiner & Seifert 1996) are flat shapes with m arms. In the
-ADE model they branch off the discocyte where its rim turns unstable to m-fold undulations
-as Δa₀ grows. The azimuthal blocks of the (r, z) geometry (``fem_ade.branch --modes``) give
-those instabilities exactly:
+Starfish vesicles (Wintz, Döbereiner & Seifert 1996) are flat shapes with m arms; one
+expects them to branch off the discocyte where its rim turns unstable to m-fold
+undulations as Δa₀ grows. The azimuthal blocks of the (r, z) geometry (``fem_ade.branch
+--modes``) give the discocyte's instabilities exactly:
 
 - **Lines.** The discocyte followed in Δa₀ from 1.0 (``--branch oblate``, R₀ = 0.2) at
   v = 0.5 and 0.7, at ε = 0.02 and 0.01, with blocks m ≤ 6 at each point. A window of an m
@@ -16,8 +16,11 @@ those instabilities exactly:
   --point I --mode 3``, 64³ and 128³ nodes of order 4). Its end: label, genus, arms,
   symmetry, and e beside the discocyte's.
 
-Hypothesis: the m-fold windows open one after another as Δa₀ grows (m = 2, 3, 4, …), and
-the m = 3 instability leads to a 3-armed starfish.
+Hypothesis: the m-fold windows open one after another as Δa₀ grows (m = 2, 3, 4, …), the
+unstable modes are undulations of the rim (max |ψ_m| at the rim), and the m = 3 instability
+leads to a 3-armed starfish. Control: where each mode lives (``mode_site``) and how far
+apart the body's two membranes are there, in units of ε — the phase field joins membranes
+closer than a few ε.
 
 Writes ``OUT/starfish.md`` (with the hand-written ``OUT/starfish_notes.md``), ``.json`` and
 ``starfish.png`` (each line's lowest eigenvalue per block against Δa₀); the full run also
@@ -46,6 +49,9 @@ KBAR, R0, MODES = 1.4, 0.2, 6
 LINES = ((0.5, 0.02, 1.0, 1.8, 0.05), (0.5, 0.01, 1.0, 1.8, 0.05),
          (0.7, 0.02, 1.0, 1.8, 0.05), (0.7, 0.01, 1.0, 1.8, 0.05))
 QUICK_LINES = ((0.5, 0.02, 1.35, 1.46, 0.05),)
+#: a mode whose max |ψ_m| lies beyond this fraction of the rim's r is the rim's (its
+#: "thickness" there is the edge's, not two membranes' distance)
+RIM = 0.9
 #: the switches: (the line's v and ε, the mode); 64³ and 128³ nodes of order 4 (1.28 per ε)
 SWITCHES = ((0.5, 0.02, 3), (0.5, 0.01, 3))
 
@@ -68,12 +74,37 @@ def line(root: Path, v: float, eps: float, start: float, stop: float, step: floa
     rows = branch_rows(made)
     bifs = json.loads((made / "bifurcations.json").read_text())["bifurcations"]
     ended = json.loads((made / "ended.json").read_text())["why"]
-    return {**out, "failed": None, "ended": ended,
+    sites = {}
+    for m in range(2, MODES + 1):
+        k = min(range(len(rows)), key=lambda i: float(rows[i][f"lowest_m{m}"]))
+        if float(rows[k][f"lowest_m{m}"]) < 0:
+            sites[str(m)] = {"point": k, "da0": float(rows[k]["da0"]),
+                             **mode_site(made / "points" / f"{k:04d}", m)}
+    return {**out, "failed": None, "ended": ended, "sites": sites,
             "points": [{"da0": float(r["da0"]), "e": float(r["e"]), "label": r["label"],
                         "lowest": [float(r[f"lowest_m{m}"]) for m in range(MODES + 1)],
                         "unstable_3d": int(r["unstable_3d"])} for r in rows],
             "bifurcations": [{"m": b["m"], "da0": b["da0"], "opens": b["unstable"][1] >
                               b["unstable"][0]} for b in bifs]}
+
+
+def mode_site(point: Path, m: int) -> dict:
+    """Where block m's softest mode ψ_m lives on a branch point: its eigenvalue, the (r, z)
+    node of max |ψ_m|, r there over the body's largest r (the rim: 1), and the body's
+    thickness along z there (the distance between its two membranes), in units of ε."""
+    import numpy as np
+
+    from fem_ade.campaigns.switch import start_fields
+
+    params, f, lam = start_fields(point, m, 1.0, grid=8)
+    r, z = f["points"]
+    i = int(np.argmax(np.abs(f["azimuthal_psi"])))
+    inside = f["phi"] > 0
+    column = inside & (np.abs(r - r[i]) < 1e-12)
+    gap = float(z[column].max() - z[column].min()) if column.any() else 0.0
+    return {"eigenvalue": float(lam), "r": float(r[i]), "r_over_rim": float(r[i] /
+                                                                              r[inside].max()),
+            "thickness_eps": gap / params.eps}
 
 
 def windows(result_line: dict) -> dict[int, list[tuple[float | None, float | None]]]:
@@ -154,7 +185,7 @@ def figure(result: dict, out: Path, suffix: str) -> Path:
 
 
 def report(result: dict, out: Path, suffix: str) -> None:
-    lines = ["# Where the starfish are born: the discocyte's rim modes", "",
+    lines = ["# Are starfish born on the discocyte? Its azimuthal modes along Δa₀", "",
              "Written by `studies/starfish.py` (its docstring says what it runs). κ̄/κ = 1.4, "
              f"R₀ = {R0:g}, the (r, z) FEM at order 8, 2.5 nodes per ε; a window: the Δa₀ "
              "where the discocyte's block m is unstable (… : to the line's end).", "",
@@ -177,6 +208,18 @@ def report(result: dict, out: Path, suffix: str) -> None:
                  range(2, MODES + 1)]
         lines.append(f"| {x['v']:g} | {x['eps']:g} | Δa₀ = {last:.3f} "
                      f"({x['points'][-1]['label']}) | " + " | ".join(cells) + " |")
+    lines += ["", "Where each block's softest mode lives, at the line's point where that block is "
+              "most unstable: r of max |ψ_m| over the rim's r, and the body's thickness there "
+              "(its two membranes' distance) in units of ε; at the rim (r/r_rim > "
+              f"{RIM:g}) none.", "",
+              "| v | ε | m | Δa₀ | λ | r/r_rim | thickness/ε |", "|---|---|---|---|---|---|---|"]
+    for x in result["lines"]:
+        for m, site in (x.get("sites") or {}).items():
+            at_rim = site["r_over_rim"] > RIM
+            lines.append(f"| {x['v']:g} | {x['eps']:g} | {m} | {site['da0']:.4f} | "
+                         f"{site['eigenvalue']:.3g} | {site['r_over_rim']:.2f} | "
+                         + ("— (the rim)" if at_rim else f"{site['thickness_eps']:.1f}")
+                         + " |")
     for s in result.get("switches") or []:
         axes = ", ".join(f"{a:.4f}" for a in s["semi_axes"] or [])
         genus = ", ".join(str(g) for g in s["genus"])

@@ -432,13 +432,16 @@ def check_branch3d(result, out):
 def check_starfish(result, out):
     """At ε = 0.02, v = 0.5 between Δa₀ = 1.35 and 1.46: the discocyte's block m = 3 turns
     unstable (a window opens; measured at 1.41 on the full line), the other blocks m ≥ 2
-    stay stable, the report and figure written."""
+    stay stable; the unstable mode lives inside the rim where the body is ~2 ε thick
+    (not a rim mode); the report and figure written."""
     (x,) = result["lines"]
     assert x["failed"] is None and result["switches"] == []
     w = _load(STUDIES / "starfish.py").windows(x)
     assert list(w) == [3], w
     ((lo, hi),) = w[3]
     assert 1.38 < lo < 1.44 and hi is None
+    site = x["sites"]["3"]  # inside the rim, where the body is ~2 ε thick (measured 2.03)
+    assert site["eigenvalue"] < 0 and site["r_over_rim"] < 0.6 and site["thickness_eps"] < 3
     assert (out / "starfish_quick.md").is_file() and (out / "starfish_quick.png").is_file()
 
 

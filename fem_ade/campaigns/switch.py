@@ -24,7 +24,7 @@ from a small δ is the axisymmetric saddle itself; the flow goes downhill from t
 along ψ_m cos mθ, to where the instability leads — a stable non-axisymmetric state if the
 branch born there is one, or another state (axisymmetric too) if it is not. That is the
 question a negative eigenvalue raises; following an unstable non-axisymmetric branch needs
-3D continuation, which this does not do.
+3D continuation: :mod:`fem_ade.campaigns.switch_branch` (``--follow``).
 """
 
 from __future__ import annotations
