@@ -28,7 +28,7 @@ seconds, one point after another in one process.
 
 from __future__ import annotations
 
-from _lib.cli import one_thread, study_parser
+from _lib.cli import one_thread, results, study_parser, write_report
 
 one_thread(fft=False)
 
@@ -214,10 +214,7 @@ def report(result: dict, out: Path, suffix: str) -> None:
         shapes_png = f"branch3d-shapes-{c['name']}.png"
         if (out / shapes_png).is_file() and not suffix:
             lines += ["", f"![three points of the branch at {c['name']}]({shapes_png})"]
-    notes = out / f"branch3d{suffix}_notes.md"
-    if notes.is_file():
-        lines += ["", notes.read_text().rstrip()]
-    (out / f"branch3d{suffix}.md").write_text("\n".join(lines) + "\n")
+    write_report(out, f"branch3d{suffix}", lines)
 
 
 def main(argv=None) -> dict:
@@ -225,17 +222,17 @@ def main(argv=None) -> dict:
                       report_only="rewrite the report and figure from branch3d.json")
     args = ap.parse_args(argv)
     suffix = "_quick" if args.quick else ""
-    path = args.out / f"branch3d{suffix}.json"
-    if args.report_only:
-        result = json.loads(path.read_text())
-    else:
-        root = args.out / f"branch3d{suffix}"
+    root = args.out / f"branch3d{suffix}"
+
+    def compute():
         root.mkdir(parents=True, exist_ok=True)
-        result = {"cases": [case(root, c) for c in (QUICK_CASES if args.quick else CASES)]}
-        path.write_text(json.dumps(result, indent=1, allow_nan=False) + "\n")
+        made = {"cases": [case(root, c) for c in (QUICK_CASES if args.quick else CASES)]}
         if not args.quick:
-            for c in result["cases"]:
+            for c in made["cases"]:
                 shapes(root, c, args.out)
+        return made
+
+    result = results(args, "branch3d", compute)
     figure(result, args.out, suffix)
     report(result, args.out, suffix)
     for c in result["cases"]:

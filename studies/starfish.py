@@ -33,7 +33,7 @@ Writes ``OUT/starfish.md`` (with the hand-written ``OUT/starfish_notes.md``), ``
 
 from __future__ import annotations
 
-from _lib.cli import one_thread, study_parser
+from _lib.cli import one_thread, results, study_parser, write_report
 
 one_thread(fft=False)
 
@@ -234,10 +234,7 @@ def report(result: dict, out: Path, suffix: str) -> None:
         if not suffix and (out / s["picture"]).is_file():
             lines += ["", f"![where m = {s['m']} leads in 3D at ε = {s['eps']:g}]"
                       f"({s['picture']})"]
-    notes = out / f"starfish{suffix}_notes.md"
-    if notes.is_file():
-        lines += ["", notes.read_text().rstrip()]
-    (out / f"starfish{suffix}.md").write_text("\n".join(lines) + "\n")
+    write_report(out, f"starfish{suffix}", lines)
 
 
 def main(argv=None) -> dict:
@@ -245,17 +242,16 @@ def main(argv=None) -> dict:
                       report_only="rewrite the report and figure from starfish.json")
     args = ap.parse_args(argv)
     suffix = "_quick" if args.quick else ""
-    path = args.out / f"starfish{suffix}.json"
-    if args.report_only:
-        result = json.loads(path.read_text())
-    else:
-        root = args.out / f"starfish{suffix}"
+    root = args.out / f"starfish{suffix}"
+
+    def compute():
         root.mkdir(parents=True, exist_ok=True)
         made = [line(root, *x) for x in (QUICK_LINES if args.quick else LINES)]
         switches = [] if args.quick else [switch_case(root, made, args.out, *c)
                                           for c in SWITCHES]
-        result = {"lines": made, "switches": [c for c in switches if c is not None]}
-        path.write_text(json.dumps(result, indent=1, allow_nan=False) + "\n")
+        return {"lines": made, "switches": [c for c in switches if c is not None]}
+
+    result = results(args, "starfish", compute)
     figure(result, args.out, suffix)
     report(result, args.out, suffix)
     for x in result["lines"]:

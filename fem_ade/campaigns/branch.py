@@ -62,6 +62,7 @@ from fem_ade.campaigns.branch_folder import (
     check_out,
     identity_digest,
     load_points,
+    lock_folder,
     open_folder,
     save_point,
     write_branch_table,
@@ -150,7 +151,6 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
     per mode, its 3D unstable count, and the bifurcations where a mode's lowest eigenvalue
     crosses zero (bifurcations.json, branch.png)."""
     from fem_ade.backends.base import make_backend
-    from fem_ade.store.lock import FolderLock
 
     say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
     check_follow(scene, param=param, start=start, stop=stop, step=step,
@@ -164,11 +164,7 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
     if stable and modes:  # (absent for modes = 0: the folders of before stay theirs)
         identity["modes"] = modes
     check = _checker(stable, modes)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        lock = FolderLock(out).acquire()
-    except OSError as err:
-        raise ModelError(f"--out {out}: cannot make or lock it ({err.strerror or err})") from None
+    lock = lock_folder(out)
     try:
         identity = open_folder(out, identity)
         tag = identity_digest(identity)

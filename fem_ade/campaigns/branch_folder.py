@@ -94,6 +94,19 @@ def check_out(out) -> Path:
     return out
 
 
+def lock_folder(out: Path):
+    """``out`` made (with its parents) and locked for this process: its
+    :class:`fem_ade.store.lock.FolderLock`, acquired; ModelError (one line) where it cannot
+    be made or locked."""
+    from fem_ade.store.lock import FolderLock
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        return FolderLock(out).acquire()
+    except OSError as err:
+        raise ModelError(f"--out {out}: cannot make or lock it ({err.strerror or err})") from None
+
+
 def open_folder(out: Path, identity: dict) -> dict:
     """The branch folder ``out`` (locked) made this branch's: a new or empty one gets its
     branch.json, one with this branch's is gone on with; ModelError (one line) for a folder

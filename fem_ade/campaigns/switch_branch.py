@@ -166,10 +166,10 @@ def follow_switched(branch: str | Path, index: int | None, out: str | Path, *,
         check_out,
         identity_digest,
         load_points,
+        lock_folder,
         open_folder,
         write_ended,
     )
-    from fem_ade.store.lock import FolderLock
 
     check_follow(points, step)
     say = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
@@ -177,11 +177,7 @@ def follow_switched(branch: str | Path, index: int | None, out: str | Path, *,
     origin, be, psi = switched_start(branch, index, point, mode, n, order)
     identity = _identity(origin, be, step, order, stability)
     made = not out.exists()
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        lock = FolderLock(out).acquire()
-    except OSError as err:
-        raise ModelError(f"--out {out}: cannot make or lock it ({err.strerror or err})") from None
+    lock = lock_folder(out)
     try:
         tag = identity_digest(open_folder(out, identity))
         phi0 = be.phi.copy()

@@ -38,3 +38,26 @@ def study_parser(doc: str, out: Path | str | None, *, out_help: str | None = Non
     if report_only is not None:
         ap.add_argument("--report-only", action="store_true", help=report_only or None)
     return ap
+
+
+def results(args, name: str, compute) -> dict:
+    """A study's result: ``OUT/NAME.json`` read back with ``--report-only``, else
+    ``compute()`` written there (``_quick`` in its name with ``--quick``)."""
+    import json
+
+    suffix = "_quick" if getattr(args, "quick", False) else ""
+    path = args.out / f"{name}{suffix}.json"
+    if getattr(args, "report_only", False):
+        return json.loads(path.read_text())
+    result = compute()
+    path.write_text(json.dumps(result, indent=1, allow_nan=False) + "\n")
+    return result
+
+
+def write_report(out: Path, stem: str, lines: list[str]) -> None:
+    """``OUT/STEM.md``: the report's lines, then the hand-written ``OUT/STEM_notes.md``
+    where there is one."""
+    notes = out / f"{stem}_notes.md"
+    if notes.is_file():
+        lines = [*lines, "", notes.read_text().rstrip()]
+    (out / f"{stem}.md").write_text("\n".join(lines) + "\n")
