@@ -14,7 +14,7 @@ bifurcation, each point's 3D stability (the rigid motions out), its e beside the
 and the prolate's axisymmetric branches at the same v, ε and R₀, its semi-axes and its
 symmetry. Two cases: ε = 0.04 on 64³ nodes of order 8 (2.56 per ε, where the blocks equal
 the 3D spectrum: ``switch.md``), up to 40 points; ε = 0.02 on 96³ nodes of order 8 (1.92
-per ε), 3 points (~14 min a point with its stability).
+per ε), 3 points (~15 min a point with its stability).
 
 Writes ``OUT/branch3d.md`` (with the hand-written ``OUT/branch3d_notes.md``), ``.json`` and
 ``branch3d.png`` (e and the semi-axes against v); the full run also
@@ -114,7 +114,7 @@ def shapes(root: Path, c: dict, out: Path) -> Path | None:
     import numpy as np
 
     from fem_ade.campaigns.switch_branch import switched_start
-    from fem_ade.plots.figures import save_figure
+    from fem_ade.plots.figures import compact_png, save_figure
     from fem_ade.plots.shapes import render_shape
 
     folder = root / f"d2-{c['name']}"
@@ -137,6 +137,7 @@ def shapes(root: Path, c: dict, out: Path) -> Path | None:
     path = out / f"branch3d-shapes-{c['name']}.png"
     save_figure(fig, path)
     plt.close(fig)
+    compact_png(path, 64, scale=0.6)  # the repository's 6 MB
     return path
 
 
@@ -191,15 +192,16 @@ def report(result: dict, out: Path, suffix: str) -> None:
         stab = sorted(r["seconds"] - r["newton_s"] for r in c["rows"])
         lines += [f"## {c['name']}, R₀ = {c['R0']:g}: {c['n']}³ nodes of order {c['order']}",
                   "", f"The oblate's block m = {c['m']} crosses zero at v = "
-                  f"{c['v_bifurcation']:.4f} (the (r, z) branch). {len(c['rows'])} points; "
-                  f"{c['ended']}. A point's Newton: median {secs[len(secs) // 2]:.1f} s "
+                  f"{c['v_bifurcation']:.4f} (the (r, z) branch). {len(c['rows'])} points "
+                  f"(where it stopped: {c['ended']}). A point's Newton: median "
+                  f"{secs[len(secs) // 2]:.1f} s "
                   f"(wall, one thread), its 3D stability median {stab[len(stab) // 2]:.1f} s.",
                   "", "| point | v | amplitude | e | e − e_oblate | e − e_prolate | label | "
                   "symmetry | semi-axes | lowest 3D λ | unstable in 3D | Newton | s |",
                   "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
         def diff(x, r):
-            return "—" if x is None else f"{r['e'] - x:+.4f}"
+            return "—" if x is None else f"{r['e'] - x:+.2e}"
 
         for k, r in enumerate(c["rows"]):
             axes = ", ".join(f"{a:.4f}" for a in r["semi_axes"])

@@ -143,7 +143,10 @@ def switch_case(root: Path, lines: list[dict], out: Path, v: float, eps: float,
     s = json.loads((run / "summary.json").read_text())
     picture = f"starfish-switch-eps={eps:g}.png"
     if (run / "shape.png").is_file():
+        from fem_ade.plots.figures import compact_png
+
         shutil.copy(run / "shape.png", out / picture)
+        compact_png(out / picture, 64, scale=0.6)  # the repository's 6 MB
     shape = s["shape"]
     body = shape.get("body") or {}
     return {"v": v, "eps": eps, "m": m, "point": k, "da0": point["da0"],
