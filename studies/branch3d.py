@@ -152,22 +152,24 @@ def figure(result: dict, out: Path, suffix: str) -> Path:
     from fem_ade.plots.figures import save_figure
 
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4.2))
-    for c in result["cases"]:
+    most = max(r["unstable_3d"] or 0 for c in result["cases"] for r in c["rows"])
+    for i, c in enumerate(result["cases"]):
         for key, style, label in (("oblate", "o-", "oblate"), ("prolate", "^-", "prolate")):
             if not c[key]:
                 continue
             v, e = zip(*c[key], strict=True)
             ax.plot(v, e, style, ms=3, color="0.5" if key == "oblate" else "0.25",
-                    label=f"{label} (axisymmetric)")
+                    label=None if i else f"{label} (axisymmetric, each ε)")
         rows = c["rows"]
         unstable = [r["unstable_3d"] or 0 for r in rows]
         ax.plot([r["v"] for r in rows], [r["e"] for r in rows], "-", color="C3", lw=1)
         sc = ax.scatter([r["v"] for r in rows], [r["e"] for r in rows], c=unstable,
-                        cmap="viridis", s=14, zorder=3, label=f"m = {c['m']} branch in 3D")
+                        cmap="viridis", s=14, zorder=3, vmin=0, vmax=most,
+                        label=None if i else f"m = {c['m']} branch in 3D")
         ax.axvline(c["v_bifurcation"], color="0.7", lw=0.8, ls=":")
-        for i in range(3):
-            bx.plot([r["v"] for r in rows], [r["semi_axes"][i] for r in rows], ".-",
-                    label=f"a{i + 1}")
+        for k in range(3):
+            bx.plot([r["v"] for r in rows], [r["semi_axes"][k] for r in rows], ".-",
+                    color=f"C{k}", label=None if i else f"a{k + 1}")
     fig.colorbar(sc, ax=ax, label="unstable directions in 3D")
     ax.set_xlabel("v")
     ax.set_ylabel("e = (W + G) / W_sphere")
