@@ -112,10 +112,27 @@ def start_fields(point: str | Path, m: int, delta: float = DELTA,
     return be.params, fields, lam
 
 
-def default_nodes(eps: float, L: float, order: int) -> int:
-    """Nodes per axis of the 3D mesh: :data:`NODES_PER_EPS`·L/ε, up to a multiple of the
-    order."""
-    return order * math.ceil(NODES_PER_EPS * L / eps / order)
+def default_nodes(eps: float, L: float, order: int, per_eps: float = NODES_PER_EPS) -> int:
+    """Nodes per axis of the 3D mesh: ``per_eps``·L/ε (default :data:`NODES_PER_EPS`), up
+    to a multiple of the order (a product that rounding lifts a hair above a multiple, as
+    2.56/0.04 can, stays on it)."""
+    return order * math.ceil(per_eps * L / eps / order - 1e-9)
+
+
+def chosen(branch: str | Path, index: int | None, point: int | None,
+           mode: int | None) -> tuple[dict, Path]:
+    """(the bifurcation, the branch point's folder) a switch starts from: bifurcation
+    ``index`` (default 0) and the point on its unstable side (or ``point``); or, with
+    ``mode`` and ``point`` and no ``index``, that block at that point, a bifurcation or not
+    (a branch unstable in it all along). ModelError (one line) for any other combination."""
+    if mode is None:
+        bif = bifurcation(branch, 0 if index is None else index)
+    elif point is None or index is not None or not (isinstance(mode, int) and mode >= 1):
+        raise ModelError("a mode m >= 1 is taken at a point (--mode M --point I, without "
+                         "--bifurcation)")
+    else:  # a point unstable in block `mode`, a bifurcation or not
+        bif = {"m": mode, "between": [point, point], "unstable": [1, 0]}
+    return bif, unstable_point(branch, bif, point)
 
 
 def switch(branch: str | Path, index: int | None, out: str | Path, *, delta: float = DELTA,
@@ -133,15 +150,8 @@ def switch(branch: str | Path, index: int | None, out: str | Path, *, delta: flo
     from fem_ade.scenes.initial import FieldIC
     from fem_ade.scenes.vesicle import DT_PER_EPS3
 
-    if mode is None:
-        bif = bifurcation(branch, 0 if index is None else index)
-    elif point is None or index is not None or not (isinstance(mode, int) and mode >= 1):
-        raise ModelError("a mode m >= 1 is switched along at a point (--mode M --point I, "
-                         "without --bifurcation)")
-    else:  # a point unstable in block `mode`, a bifurcation or not
-        bif = {"m": mode, "between": [point, point], "unstable": [1, 0]}
+    bif, point = chosen(branch, index, point, mode)
     m = int(bif["m"])
-    point = unstable_point(branch, bif, point)
     options = {"order": order} if backend == "fem" else {}
     with tempfile.TemporaryDirectory() as tmp:
         params, fields, lam = start_fields(point, m, delta)

@@ -75,33 +75,21 @@ COLUMNS = ("point", "v", "e", "E", "amplitude", "label", "symmetry", "semi_axes"
            "eigenvalues", "newton", "seconds", "s")
 
 
-def default_nodes(eps: float, L: float, order: int = ORDER) -> int:
-    """:data:`NODES_PER_EPS`·L/ε nodes per axis, up to a multiple of the order."""
-    return order * math.ceil(NODES_PER_EPS * L / eps / order - 1e-9)
-
-
 def switched_start(branch, index, point, mode, n, order):
     """(what the branch leaves: the branch, bifurcation, m, point, its eigenvalue and
     v_bifurcation; the 3D FEM backend at the revolved φ₀ on ``n`` nodes of ``order``; ψ̂ on
     its nodes, max |ψ̂| = 1): the start of :func:`follow_switched`."""
     from fem_ade.backends.base import make_backend
-    from fem_ade.campaigns.switch import bifurcation, start_fields, unstable_point
+    from fem_ade.campaigns.switch import chosen, default_nodes, start_fields
     from fem_ade.scenes.catalogue import Scene
     from fem_ade.scenes.fields import meridian_values
     from fem_ade.scenes.initial import FieldIC
     from fem_ade.scenes.vesicle import DT_PER_EPS3
 
-    if mode is None:
-        bif = bifurcation(branch, 0 if index is None else index)
-    elif point is None or index is not None or not (isinstance(mode, int) and mode >= 1):
-        raise ModelError("a mode m >= 1 is followed from a point (--mode M --point I, "
-                         "without --bifurcation)")
-    else:
-        bif = {"m": mode, "between": [point, point], "unstable": [1, 0]}
+    bif, folder = chosen(branch, index, point, mode)
     m = int(bif["m"])
-    folder = unstable_point(branch, bif, point)
     params, fields, lam = start_fields(folder, m, 1.0)
-    n = n or default_nodes(params.eps, params.L, order)
+    n = n or default_nodes(params.eps, params.L, order, NODES_PER_EPS)
     with tempfile.TemporaryDirectory() as tmp:
         start = Path(tmp) / "axisymmetric.npz"
         np.savez(start, **{k: fields[k] for k in ("axis", "points", "phi")})
