@@ -126,6 +126,7 @@ def windows(result_line: dict) -> dict[int, list[tuple[float | None, float | Non
 def switch_case(root: Path, lines: list[dict], out: Path, v: float, eps: float,
                 m: int) -> dict | None:
     """The 3D flow from the line (v, ε)'s point most unstable in block m."""
+    from fem_ade.analysis.shape import symmetry_group
     from fem_ade.analysis.sharp import reduced_energy
     from fem_ade.campaigns.switch import switch
 
@@ -153,7 +154,7 @@ def switch_case(root: Path, lines: list[dict], out: Path, v: float, eps: float,
             "eigenvalue": point["lowest"][m], "discocyte_e": point["e"],
             "status": s["status"], "steps": s["steps"], "label": shape["label"],
             "genus": shape["genus"], "arms": shape["arms"],
-            "symmetry": (body.get("symmetry") or {}).get("group"),
+            "symmetry": symmetry_group(shape),
             "semi_axes": body.get("semi_axes"), "e": reduced_energy(s["final"]),
             "cpu_s": round(s["cpu_s"], 1), "n": s.get("backend_info", {}).get("n"),
             "picture": picture}

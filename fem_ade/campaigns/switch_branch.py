@@ -119,6 +119,7 @@ def _continuation(be, psi):
 
 
 def _row(be, cont, psi, phi0, newton: int, t0: float, stability: bool) -> dict:
+    from fem_ade.analysis.shape import symmetry_group
     from fem_ade.analysis.sharp import reduced_energy
 
     t1 = time.perf_counter()
@@ -137,7 +138,7 @@ def _row(be, cont, psi, phi0, newton: int, t0: float, stability: bool) -> dict:
                 "label": (shape or {}).get("label"),
                 "semi_axes": [round(a, 6) for a in body.get("semi_axes", [])] or None,
                 "newton_s": round(t1 - t0, 2), "seconds": round(time.perf_counter() - t0, 2)})
-    row["symmetry"] = (body.get("symmetry") or {}).get("group")
+    row["symmetry"] = symmetry_group(shape) if shape else None
     return row
 
 
