@@ -1,16 +1,22 @@
-"""What a 3D steady state costs by Newton's method, with and without its pins (issue 44's
-cost targets), measured in one run.
+"""What a 3D steady state costs by Newton's method: with and without its pins (issue 44's
+cost targets), with and without the coarse space of shape modes (issue 42's target 3),
+measured in one run.
 
 The state: a prolate with ADE (v = 0.85, κ̄/κ = 1.4, Δa₀ = 1.2, R₀ = 0.18) whose axis lies
 along none of the mesh's, (0.45, 0.3, 0.84), and whose centre is off the nodes, on the 3D
 tensor FEM of order 4 — ε = 0.02 on 64³ nodes (1.28 nodes per ε, what 3D affords there);
 ``--quick``: ε = 0.04 on 32³. The steady recipe's flow relaxes it to a change of 1e-6 per
-step; from there Newton (:func:`fem_ade.backends.fem.newton.solve_steady`, MINRES with the
-bulk preconditioner) runs twice from the same field: with the pins (P times the starting
-state's rigid motions, docs/model.md §12) and without them. Prints and writes, per case, the
-iterations, the MINRES iterations per Newton step, the CPU seconds, E, how far the pins'
-values and the centroid moved, and the ratio of the two Newton times, beside the issue's
-target (a 3D steady state at ε = 0.02 in ≤ 60 s). One thread, one process, CPU seconds.
+step; from there Newton (:func:`fem_ade.backends.fem.newton.solve_steady`) runs three times
+from the same field: with the pins (P times the starting state's rigid motions, docs/model.md
+§12) and MINRES preconditioned by the bulk Hessian P and the coarse space
+(:mod:`fem_ade.backends.fem.coarse`, the default); the same with P alone (``linear="minres"``,
+the path before the coarse space); and without the pins. Prints and writes, per case, the
+iterations, the MINRES iterations per Newton step, the coarse spaces made, the CPU seconds,
+E, how far the pins' values and the centroid moved; the ratios of the MINRES iterations and
+of the CPU seconds, P alone over the coarse space (target: ≥ 5× fewer iterations at 64³,
+ε = 0.02, with the same converged state), and of the pinned and free Newton times, beside
+issue 44's target (a 3D steady state at ε = 0.02 in ≤ 60 s). One thread, one process, CPU
+seconds.
 
     python studies/newton3d_bench.py --out studies/results
     python studies/newton3d_bench.py --quick
@@ -53,9 +59,9 @@ def tilted_prolate(eps: float, n: int):
     return be, flow.steps, time.process_time() - c0
 
 
-def newton(be, phi0, pins, pinned: bool) -> dict:
+def newton(be, phi0, pins, pinned: bool, linear: str = "auto") -> dict:
     """Newton from ``phi0`` with the pins or without them (the pins' values measured by the
-    pinned system's functionals ``pins`` in both)."""
+    pinned system's functionals ``pins`` in both), by the ``linear`` solver."""
     import numpy as np
 
     from fem_ade.backends.fem.newton import NewtonSystem, solve_steady
@@ -71,17 +77,20 @@ def newton(be, phi0, pins, pinned: bool) -> dict:
         be._set(phi0.copy(), None)
         c0, t0 = centroid(), np.array([p @ phi0 for p in pins])
         cpu = time.process_time()
-        result = solve_steady(be, max_iterations=40)
+        result = solve_steady(be, max_iterations=40, linear=linear)
         cpu = time.process_time() - cpu
     finally:
         NewtonSystem._translations = original
     return {"converged": result.converged, "iterations": result.iterations,
-            "minres": result.krylov, "cpu_s": round(cpu, 2), "E": result.E,
+            "minres": result.krylov, "coarse": result.coarse, "cpu_s": round(cpu, 2),
+            "E": result.E, "phi": be.phi.copy(),
             "pins_moved": float(np.abs(np.array([p @ be.phi for p in pins]) - t0).max()),
             "centroid_moved": float(np.abs(centroid() - c0).max())}
 
 
 def main(argv=None) -> dict:
+    import numpy as np
+
     from fem_ade.backends.fem.newton import NewtonSystem
     from fem_ade.store.output import write_json_atomic
 
@@ -95,16 +104,29 @@ def main(argv=None) -> dict:
               "flow_steps": steps, "flow_cpu_s": round(flow_s, 2), "pins": len(pins)}
     print(f"eps = {eps:g}, {n}^3 nodes of order 4: the flow to 1e-6 took {steps} steps, "
           f"{flow_s:.1f} s CPU; {len(pins)} pins", flush=True)
-    for name, pinned in (("pinned", True), ("free", False)):
-        r = result[name] = newton(be, phi0, pins, pinned)
+    for name, pinned, linear in (("pinned", True, "auto"), ("P_alone", True, "minres"),
+                                 ("free", False, "auto")):
+        r = result[name] = newton(be, phi0, pins, pinned, linear)
+        spaces = "; ".join(f"a coarse space of {c['functions']} functions, {c['deflated']} "
+                           f"deflated, in {c['seconds']} s" for c in r["coarse"])
         print(f"  Newton {name}: converged {r['converged']} in {r['iterations']} "
-              f"(MINRES {r['minres']}), {r['cpu_s']} s CPU, E = {r['E']:.10g}; the pins "
-              f"moved {r['pins_moved']:.2g}, the centroid {r['centroid_moved']:.2g}",
-              flush=True)
+              f"(MINRES {r['minres']}{'; ' + spaces if spaces else ''}), {r['cpu_s']} s "
+              f"CPU, E = {r['E']:.13g}; the pins moved {r['pins_moved']:.2g}, the centroid "
+              f"{r['centroid_moved']:.2g}", flush=True)
+    plain, coarse = result["P_alone"], result["pinned"]
+    result["minres_ratio"] = round(sum(plain["minres"]) / sum(coarse["minres"]), 2)
+    result["coarse_speedup"] = round(plain["cpu_s"] / coarse["cpu_s"], 2)
+    result["coarse_E_difference"] = coarse["E"] / plain["E"] - 1
+    result["coarse_phi_difference"] = float(np.abs(coarse["phi"] - plain["phi"]).max())
     result["speedup"] = round(result["free"]["cpu_s"] / result["pinned"]["cpu_s"], 2)
     result["E_difference"] = result["free"]["E"] / result["pinned"]["E"] - 1
     result["target_s"] = TARGET_S
-    print(f"  pinned / free: {result['speedup']}x less CPU; E free / pinned - 1 = "
+    for r in (plain, coarse, result["free"]):
+        del r["phi"]
+    print(f"  P alone / coarse space: {result['minres_ratio']}x the MINRES iterations "
+          f"(target >= 5x), {result['coarse_speedup']}x the CPU; E differs by "
+          f"{result['coarse_E_difference']:.2g}, phi by {result['coarse_phi_difference']:.2g}")
+    print(f"  free / pinned: {result['speedup']}x the CPU; E free / pinned - 1 = "
           f"{result['E_difference']:.2g}; target (eps = 0.02, <= {TARGET_S:g} s): Newton "
           f"{result['pinned']['cpu_s']} s, flow + Newton "
           f"{round(flow_s + result['pinned']['cpu_s'], 1)} s")

@@ -288,8 +288,7 @@ def rigid_motions(be, phi: np.ndarray) -> list[np.ndarray]:
     """The rigid motions of a 3D state as fields on its nodes: the translations ∂ₐφ and the
     rotations about the centroid (x − c) × ∇φ, by the spectral elements' derivative."""
     space = be.space
-    Phi = phi.reshape(space.shape)
-    grads = [along(_derivative(ax), Phi, a).ravel() for a, ax in enumerate(space.axes)]
+    grads = gradient(space, phi)
     X = space.doflocs
     inside = space.weights * (phi + 1.0)
     c = [float(np.sum(inside * x) / np.sum(inside)) for x in X]
@@ -297,6 +296,13 @@ def rigid_motions(be, phi: np.ndarray) -> list[np.ndarray]:
     rotations = [d[1] * grads[2] - d[2] * grads[1], d[2] * grads[0] - d[0] * grads[2],
                  d[0] * grads[1] - d[1] * grads[0]]
     return grads + rotations
+
+
+def gradient(space, phi: np.ndarray) -> list[np.ndarray]:
+    """∇φ at the nodes of a tensor space, one array per axis (the spectral elements'
+    derivative, the mean of the two cells' at a shared node)."""
+    Phi = np.reshape(phi, space.shape)
+    return [along(_derivative(ax), Phi, a).ravel() for a, ax in enumerate(space.axes)]
 
 
 def _derivative(axis):

@@ -10,10 +10,13 @@ and Newton's method goes to it directly: each iteration solves the bordered syst
     [ H_L  C ] [δφ]     [ ∇_φ L ]
     [ Cᵀ   0 ] [δλ] = − [ c(φ)  ],     C = (∇V_h, ∇A_h, ∇T),
 
-by MINRES (:func:`minres`, which takes an indefinite H_L: saddles too),
-preconditioned by diag(P, CᵀP⁻¹C) with P = (4κ/ε³)W + (4κ/ε)K + κε KW⁻¹K — the Hessian of
-E_h in the bulk phases (φ = ±1, P′(φ) = 2), SPD, and inverted exactly by the space's fast
-diagonalization. H_L·v is exact: every term's linearization
+by a sparse LU of the Hessian in mixed form where the space is 2D with natural edges (the
+axisymmetric geometry: :mod:`fem_ade.backends.fem.direct`), elsewhere by MINRES
+(:func:`minres`, which takes an indefinite H_L: saddles too), preconditioned by
+diag(M, CᵀP⁻¹C) with P = (4κ/ε³)W + (4κ/ε)K + κε KW⁻¹K — the Hessian of E_h in the bulk
+phases (φ = ±1, P′(φ) = 2), SPD, and inverted exactly by the space's fast diagonalization —
+and M⁻¹ = P⁻¹ plus a coarse space's correction for the membrane's shape modes
+(:mod:`fem_ade.backends.fem.coarse`; ``linear="minres"``: P⁻¹ alone). H_L·v is exact: every term's linearization
 (:meth:`fem_ade.backends.fem.step.MixedStep.hessian_vector`, checked against finite differences of
 the gradient to 1e-9). T = Σ wᵢ zᵢ φᵢ pins the translation along z that the energy of an
 axisymmetric run does not see (it would make H_L singular; its multiplier is 0 at a
@@ -24,14 +27,13 @@ restored along P⁻¹∇V, P⁻¹∇A; it stops when the decrement |∇Lᵀδφ|
 step would still gain — is below ``tol``: a steady state by a residual criterion, where the
 gradient flow stops on its energy's change per step.
 
-What it costs (the prolate at v = 0.8 from the flow's 1e-9 stop, order 8, 2.5 nodes per ε):
-at ε = 0.01, 2–4 iterations of 95–225 MINRES iterations; at ε = 0.005, 8 of 360–580 (the
-first step cut to ¼ by the line search; E to 3e-10 of the flow run to a change of 1e-12 per
-step, in 3× its time). MINRES needs ~R/ε iterations: P treats the membrane's shape modes,
-whose Hessian eigenvalues are the sharp bending energy's, as bulk modes of eigenvalue 4κ/ε³
-— a coarse space of interface displacements would be the cure. So Newton is the tool for
-exact steady states and for continuation at moderate ε (fem_ade's branches), not a faster
-road to the smallest ε.
+What it costs with P alone (the axisymmetric prolate at v = 0.8 from the flow's 1e-9 stop,
+order 8, 2.5 nodes per ε): at ε = 0.01, 2–4 iterations of 95–225 MINRES iterations; at
+ε = 0.005, 8 of 360–580 (the first step cut to ¼ by the line search; E to 3e-10 of the flow
+run to a change of 1e-12 per step, in 3× its time). MINRES with P alone needs ~R/ε
+iterations: P treats the membrane's shape modes, whose Hessian eigenvalues are the sharp
+bending energy's, as bulk modes of eigenvalue 4κ/ε³. Hence the LU in 2D, and in 3D the
+coarse space of interface displacements (figures: studies/newton3d_bench.py).
 
 Why more iterations at small ε (measured, ε = 0.005 above): the error |φ − φ*|∞ fell
 3.5e-2, 2.6e-2, 2.1e-2, 1.3e-2, 9.4e-3, 3.1e-3, 1.7e-3, then quadratically 9.3e-5 → 0.
@@ -69,7 +71,8 @@ class NewtonError(ArithmeticError):
 class NewtonResult:
     """What :func:`solve_steady` did: ``converged``, ``iterations``, ``krylov`` (MINRES
     iterations per Newton step), ``decrement`` and ``violation`` per iteration (before its
-    step), ``E``, the multipliers ``lambda_V``, ``lambda_A``, the seconds it took."""
+    step), ``E``, the multipliers ``lambda_V``, ``lambda_A``, the seconds it took, the
+    ``coarse`` spaces it made."""
 
     converged: bool
     iterations: int
@@ -81,13 +84,18 @@ class NewtonResult:
     violation: list[float] = field(default_factory=list)
     seconds: float = 0.0
     message: str = ""
+    #: the coarse spaces made for MINRES (:meth:`fem_ade.backends.fem.coarse.CoarseSpace.
+    #: describe`), in order
+    coarse: list[dict] = field(default_factory=list)
 
 
 #: the linear solvers of the bordered Newton system: ``direct`` (a sparse LU of the mixed
-#: Hessian with its borders, :mod:`fem_ade.backends.fem.direct`: 2D tensor spaces), ``minres``
-#: (preconditioned by the bulk Hessian's fast diagonalization: any tensor space), ``auto``
-#: (direct where it applies)
-LINEAR_SOLVERS = ("auto", "direct", "minres")
+#: Hessian with its borders, :mod:`fem_ade.backends.fem.direct`: 2D tensor spaces with
+#: natural edges), ``coarse`` (MINRES preconditioned by the bulk Hessian's fast
+#: diagonalization and a coarse space of shape modes, :mod:`fem_ade.backends.fem.coarse`),
+#: ``minres`` (the bulk Hessian alone: any tensor space), ``auto`` (direct where it
+#: applies, coarse elsewhere)
+LINEAR_SOLVERS = ("auto", "direct", "coarse", "minres")
 
 
 class NewtonSystem:
@@ -116,6 +124,8 @@ class NewtonSystem:
             raise ModelError("the direct solver factors the Hessian of a 2D space with natural "
                              "edges (the axisymmetric geometry); use minres")
         self.direct = planar if linear == "auto" else linear == "direct"
+        self.uses_coarse = not planar if linear == "auto" else linear == "coarse"
+        self.coarse = None  # the coarse space in use (made by the first solve that needs one)
         self._K = None
 
     @property
@@ -234,6 +244,18 @@ class NewtonSystem:
     def P_inverse(self, x: np.ndarray) -> np.ndarray:
         return self.basis.apply(np.asarray(x)[None], self.P_inverse_symbol)[0]
 
+    def coarse_space(self, lin: Linearization):
+        """The coarse space for MINRES at ``lin``: the one in use, or a new one made at ``lin``
+        when there is none or it has gone stale (:attr:`fem_ade.backends.fem.coarse.
+        CoarseSpace.stale`); None without ``uses_coarse``."""
+        if not self.uses_coarse:
+            return None
+        if self.coarse is None or self.coarse.stale:
+            from fem_ade.backends.fem.coarse import CoarseSpace
+
+            self.coarse = CoarseSpace(self, lin)
+        return self.coarse
+
     def multipliers(self, g: np.ndarray, C: list[np.ndarray]) -> np.ndarray:
         """The λ that minimise ‖∇E + Cλ‖ in the P⁻¹ norm."""
         PC = [self.P_inverse(c) for c in C]
@@ -272,8 +294,9 @@ def kkt_solve(sys_: NewtonSystem, lin: Linearization, rhs: np.ndarray,
               inner_tol: float = 1e-8) -> tuple[np.ndarray, int]:
     """x with [[H_L, C], [Cᵀ, 0]] x = rhs (length N + len(C); or a stack of right sides,
     (N + len(C), k)): by the factored Hessian (``sys_.direct``: the same factorization for
-    every right side), or by MINRES, preconditioned by diag(P, CᵀP⁻¹C) (module docstring);
-    (x, MINRES iterations: 0 for the direct solve)."""
+    every right side), or by MINRES, preconditioned by diag(P, CᵀP⁻¹C) (module docstring),
+    P⁻¹ with the coarse space's correction added where ``sys_.uses_coarse``
+    (:meth:`NewtonSystem.coarse_space`); (x, MINRES iterations: 0 for the direct solve)."""
     rhs = np.asarray(rhs, dtype=float)
     N = lin.phi.size
     if sys_.direct:
@@ -295,10 +318,18 @@ def kkt_solve(sys_: NewtonSystem, lin: Linearization, rhs: np.ndarray,
             top = top + nj * cj
         return np.concatenate([top, [global_dot(c, v) for c in C]])
 
-    def prec(x):
-        return np.concatenate([sys_.P_inverse(x[:N]), S_inv @ x[N:]])
+    coarse = sys_.coarse_space(lin)
 
-    return minres(kkt, rhs, prec, rtol=inner_tol, maxiter=5000)
+    def prec(x):
+        y = sys_.P_inverse(x[:N])
+        if coarse is not None:
+            y += coarse.apply(x[:N])
+        return np.concatenate([y, S_inv @ x[N:]])
+
+    x, its = minres(kkt, rhs, prec, rtol=inner_tol, maxiter=5000)
+    if coarse is not None:
+        coarse.record(its)
+    return x, its
 
 
 def minres(A, b: np.ndarray, M, *, rtol: float, maxiter: int) -> tuple[np.ndarray, int]:
@@ -376,7 +407,10 @@ def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
     for it in range(max_iterations + 1):
         lin = linearize(sys_, phi)
         E = lin.E
+        made = sys_.coarse
         x, its = kkt_solve(sys_, lin, -np.concatenate([lin.grad, lin.violation]), inner_tol)
+        if sys_.coarse is not made:
+            result.coarse.append(sys_.coarse.describe())
         gL, viol, lam = lin.grad, lin.violation, lin.lam
         dphi = x[:N]
         if global_dot(gL, dphi) > 0.0:  # negative curvature along the step: downhill instead
