@@ -4,8 +4,8 @@ space without a direct solve (3D; docs/model.md §12).
 Why: Newton's preconditioner P, the bulk Hessian (:mod:`fem_ade.backends.fem.newton`), sees
 a displacement of the interface as a bulk mode of eigenvalue ~4κ/ε³, where the Hessian gives
 it the bending energy's: in units of P the shape modes' eigenvalues are ~1e-2 (3D, ε = 0.04,
-32³) down to ~1e-5 (ε = 0.01), and MINRES spends its iterations on them — 388 per Newton
-step on the tilted prolate at 64³ nodes, ε = 0.02 (studies/newton3d_bench.py). The cure is to
+32³) down to ~1e-5 (ε = 0.01), and MINRES spends its iterations on them — 331–389 per
+Newton step on the tilted prolate at 64³ nodes, ε = 0.02 (studies/newton3d_bench.py). The cure is to
 tell the preconditioner those modes' true curvature.
 
 The coarse functions (:func:`shape_functions`). Moving the interface by a small vector field
@@ -14,8 +14,8 @@ the interface's bounding box, each evaluated at the node's projection onto the s
 (x − s n, with s = √2 ε artanh φ the signed distance of the equilibrium profile and
 n = ∇φ/|∇φ|), so that the function is constant across the interface as a displacement is:
 z = p(x − s n) ∂ₐφ for each polynomial p and axis a, dim·C(d + dim, dim) functions (252 at
-d = 6 in 3D). Measured on the tilted prolate at 32³, ε = 0.04 (first Newton step, MINRES
-118 iterations with P alone): piecewise-linear hats on an 8³ grid times ∂ₐφ without the
+d = 6 in 3D). Measured, unsmoothed, on the tilted prolate at 32³, ε = 0.04 (first Newton
+step, MINRES 118 iterations with P alone): piecewise-linear hats on an 8³ grid times ∂ₐφ without the
 projection 81 iterations, with it 67; these polynomials at d = 6, 38. With |∇φ| in place of
 the three ∂ₐφ (normal displacements only) 104 at 64³ against 55.
 
@@ -58,16 +58,19 @@ import numpy as np
 
 from fem_ade.backends.fem.solve import global_dot
 
-#: the polynomials' total degree and the smoothing steps (:class:`CoarseSpace`); measured on
-#: the first Newton step of studies/newton3d_bench.py's tilted prolate at 64³, ε = 0.02
-#: (one thread; 389 MINRES iterations with P alone, 13 s): unsmoothed d = 4, 5, 6, 7: 94, 78,
-#: 55, 49 iterations after 2.6, 4.7, 8.9, 16 s of set-up; one smoothing step, d = 4, 5, 6:
-#: 69, 52, 41 after 5.7, 9.6, 16 s (a solve 3.5, 3.0, 2.7 s). On the oblate of
-#: tests/test_switch.py with its m = 2 mode (32³ nodes, order 8, ε = 0.04; 67 with P alone)
-#: unsmoothed d = 2, 4, 6: 113, 77, 59 — worse than P alone at low degree — and smoothed
-#: once 70, 46, 34 (d = 5: 36); twice 67, 39, 30
+#: the polynomials' total degree and the smoothing steps (:class:`CoarseSpace`); measured on the
+#: first Newton step of studies/newton3d_bench.py's tilted prolate at 64³, ε = 0.02 (one thread;
+#: 389 MINRES iterations with P alone, 13 s; ``cut`` 0.5): unsmoothed d = 4, 5, 6, 7: 94, 78, 55,
+#: 49 iterations after 2.6, 4.7, 8.9, 16 s of set-up; one smoothing step, d = 4, 5, 6: 69, 52, 41
+#: after 5.7, 9.6, 16 s (a solve 3.5, 3.0, 2.7 s). On the oblate of tests/test_switch.py with its
+#: m = 2 mode (32³ nodes, order 8, ε = 0.04; 67 with P alone) unsmoothed d = 2, 4, 6: 113, 77, 59
+#: — worse than P alone at low degree — and smoothed once 70, 46, 34 (d = 5: 36); twice 67, 39,
+#: 30
 DEGREE, SMOOTH = 5, 1
 #: Ritz values below this (in units of P) are deflated; above it P is a fair model already
+#: (measured, d = 5 smoothed once: 0.05, 0.1, 0.2, 0.5, 1 deflate 12, 24, 42, 98, 164 vectors
+#: and take 53, 37, 32, 30, 30 iterations on the tilted prolate at 32³; at 64³ 0.2 and 0.5
+#: take 53 and 52, a solve 2.8 and 3.0 s)
 CUT = 0.2
 #: a Ritz value's magnitude is floored here: a zero mode left in the space (none should
 #: be: the constraints' gradients hold the rigid motions) must not make M singular

@@ -11,16 +11,15 @@ and Newton's method goes to it directly: each iteration solves the bordered syst
     [ Cᵀ   0 ] [δλ] = − [ c(φ)  ],     C = (∇V_h, ∇A_h, ∇T),
 
 by a sparse LU of the Hessian in mixed form where the space is 2D with natural edges (the
-axisymmetric geometry: :mod:`fem_ade.backends.fem.direct`), elsewhere by MINRES
-(:func:`minres`, which takes an indefinite H_L: saddles too), preconditioned by
-diag(M, CᵀP⁻¹C) with P = (4κ/ε³)W + (4κ/ε)K + κε KW⁻¹K — the Hessian of E_h in the bulk
-phases (φ = ±1, P′(φ) = 2), SPD, and inverted exactly by the space's fast diagonalization —
-and M⁻¹ = P⁻¹ plus a coarse space's correction for the membrane's shape modes
-(:mod:`fem_ade.backends.fem.coarse`; ``linear="minres"``: P⁻¹ alone). H_L·v is exact: every term's linearization
-(:meth:`fem_ade.backends.fem.step.MixedStep.hessian_vector`, checked against finite differences of
-the gradient to 1e-9). T = Σ wᵢ zᵢ φᵢ pins the translation along z that the energy of an
-axisymmetric run does not see (it would make H_L singular; its multiplier is 0 at a
-solution); in 3D the pins are P times the starting state's rigid motions (three
+axisymmetric geometry: :mod:`fem_ade.backends.fem.direct`), elsewhere by MINRES (:func:`minres`,
+which takes an indefinite H_L: saddles too), preconditioned by diag(M, CᵀP⁻¹C) with P = (4κ/ε³)W +
+(4κ/ε)K + κε KW⁻¹K — the Hessian of E_h in the bulk phases (φ = ±1, P′(φ) = 2), SPD, and inverted
+exactly by the space's fast diagonalization — and M⁻¹ = P⁻¹ plus a coarse space's correction for the
+membrane's shape modes (:mod:`fem_ade.backends.fem.coarse`; ``linear="minres"``: P⁻¹ alone). H_L·v
+is exact: every term's linearization (:meth:`fem_ade.backends.fem.step.MixedStep.hessian_vector`,
+checked against finite differences of the gradient to 1e-9). T = Σ wᵢ zᵢ φᵢ pins the translation
+along z that the energy of an axisymmetric run does not see (it would make H_L singular; its
+multiplier is 0 at a solution); in 3D the pins are P times the starting state's rigid motions (three
 translations, the rotations that move it), so that a correction neither moves nor turns it.
 The step is halved until E falls by 1e-4 of the Newton decrement, once V and A are
 restored along P⁻¹∇V, P⁻¹∇A; it stops when the decrement |∇Lᵀδφ|/|E| — the energy the next
