@@ -273,3 +273,24 @@ def test_a_coarse_space_from_another_state_is_still_a_preconditioner(tilted):
     assert other.stale
     kkt_solve(sys_, lin, rhs, inner_tol=1e-10)
     assert sys_.coarse is not other and sys_.coarse.solves == 1
+
+
+def test_the_coarse_spaces_hessian_of_a_stack_is_the_hessian_vector_product(tilted):
+    """coarse.hessian (H on a stack, from the Hessian's coefficients: what the smoothing and
+    the Ritz values use) equals hessian_vector + constraint_hessian_vector column by column,
+    at the tilted prolate's multipliers (to 1e-12 of the largest entry)."""
+    from fem_ade.backends.fem.coarse import hessian
+    from fem_ade.backends.fem.newton import NewtonSystem, linearize
+
+    be, phi0 = tilted
+    sys_ = NewtonSystem(be)
+    lin = linearize(sys_, phi0)
+    co = sys_.step.hessian_coefficients(lin.phi, lin.mu, lin.Kphi, lin.lam[0], lin.lam[1])
+    z = np.random.default_rng(2).standard_normal((3, phi0.size))
+    got = hessian(be.space, sys_.bulk()[2], co, z)
+    st = sys_.step
+    for zi, gi in zip(z, got, strict=True):
+        want = (st.hessian_vector(lin.phi, lin.mu, lin.Kphi, zi)
+                + st.constraint_hessian_vector(lin.phi, lin.Kphi, zi, lin.lam[0], lin.lam[1]))
+        assert np.abs(gi - want).max() <= 1e-12 * np.abs(want).max()
+    assert lin.lam[0] != 0.0 and lin.lam[1] != 0.0  # the constraints' part is in it

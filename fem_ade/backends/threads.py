@@ -1,8 +1,10 @@
 """Threads, set once and on purpose: how many the linear algebra (BLAS) and scipy's FFTs use.
 
 * **BLAS** (numpy's and scipy's OpenBLAS/MKL): one thread by default during a run, a resume
-  and a branch (:func:`limited`, applied by :func:`fem_ade.engine.runs.simulate`,
-  :func:`fem_ade.engine.runs.resume` and :func:`fem_ade.campaigns.branch.follow`),
+  and a branch, axisymmetric or switched into 3D (:func:`limited`, applied by
+  :func:`fem_ade.engine.runs.simulate`, :func:`fem_ade.engine.runs.resume`,
+  :func:`fem_ade.campaigns.branch.follow` and
+  :func:`fem_ade.campaigns.switch_branch.follow_switched`),
   ``FEM_ADE_BLAS_THREADS=N``
   for N, ``FEM_ADE_BLAS_THREADS=all`` for the library's own choice (all cores). Measured on
   this 2-core machine, ``discocyte --backend fem --order 4 --n 64 --steps 50`` (16 cells of

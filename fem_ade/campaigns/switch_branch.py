@@ -55,6 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fem_ade.backends.threads import limit_threads
 from fem_ade.model.params import ModelError
 
 #: the 3D mesh's nodes per unit length per 1/ε (module docstring: 64 nodes of order 8 at
@@ -142,6 +143,7 @@ def _row(be, cont, psi, phi0, newton: int, t0: float, stability: bool) -> dict:
     return row
 
 
+@limit_threads
 def follow_switched(branch: str | Path, index: int | None, out: str | Path, *,
                     points: int = 12, step: float = STEP, n: int | None = None,
                     order: int = ORDER, stability: bool = False, point: int | None = None,

@@ -117,6 +117,20 @@ def shape_functions(space, phi: np.ndarray, eps: float, degree: int = DEGREE) ->
     return Z
 
 
+def hessian(space, ke: float, co: dict, z: np.ndarray) -> np.ndarray:
+    """H z for a stack z (k × N), H = κε K W⁻¹K + K diag(α) + diag(α) K + W diag(γ) + c₀ K +
+    Σ σᵢ bᵢbᵢᵀ from its coefficients ``co`` (:meth:`fem_ade.backends.fem.step.MixedStep.
+    hessian_coefficients`; equal to ``hessian_vector`` + ``constraint_hessian_vector``
+    row by row), ``ke`` = κε."""
+    w = space.weights
+    kz = w * space.laplacian(z)
+    hz = (ke * w * space.laplacian(kz / w) + w * space.laplacian(co["alpha"] * z)
+          + co["alpha"] * kz + w * co["gamma"] * z + co["c0"] * kz)
+    for s, b in co["rank_one"]:
+        hz += s * np.outer(z @ b, b)
+    return hz
+
+
 class CoarseSpace:
     """The coarse correction of the Newton system's preconditioner at ``lin`` (module
     docstring): ``apply(x)`` = Vᵀ diag(1/|θ| − 1) V x; ``theta`` the Ritz values (all,
@@ -139,12 +153,8 @@ class CoarseSpace:
         for _ in range(smooth):
             for i in range(0, len(Z), CHUNK):
                 z = Z[i:i + CHUNK]
-                kz = w * space.laplacian(z)
-                hz = (ke * w * space.laplacian(kz / w) + w * space.laplacian(co["alpha"] * z)
-                      + co["alpha"] * kz + w * co["gamma"] * z + co["c0"] * kz)
-                for s_, b in co["rank_one"]:
-                    hz += s_ * np.outer(z @ b, b)
-                Z[i:i + CHUNK] = z - sys_.basis.apply(hz, sys_.P_inverse_symbol)
+                Z[i:i + CHUNK] = z - sys_.basis.apply(hessian(space, ke, co, z),
+                                                      sys_.P_inverse_symbol)
             Z -= np.linalg.solve(S, C @ Z.T).T @ PC
         KZ = np.empty_like(Z)
         for i in range(0, len(Z), CHUNK):
