@@ -9,8 +9,9 @@ tensor FEM of order 4 — ε = 0.02 on 64³ nodes (1.28 nodes per ε, what 3D af
 step; from there Newton (:func:`fem_ade.backends.fem.newton.solve_steady`) runs three times
 from the same field: with the pins (P times the starting state's rigid motions, docs/model.md
 §12) and MINRES preconditioned by the bulk Hessian P and the coarse space
-(:mod:`fem_ade.backends.fem.coarse`, the default); the same with P alone (``linear="minres"``,
-the path before the coarse space); and without the pins. Prints and writes, per case, the
+(:mod:`fem_ade.backends.fem.coarse`, ``linear="coarse"``: the default from 10⁵ nodes); the
+same with P alone (``linear="minres"``, the path before the coarse space); and without the
+pins, with the coarse space. Prints and writes, per case, the
 iterations, the MINRES iterations per Newton step, the coarse spaces made, the CPU seconds,
 E, how far the pins' values and the centroid moved; the ratios of the MINRES iterations and
 of the CPU seconds, P alone over the coarse space (target: ≥ 5× fewer iterations at 64³,
@@ -59,7 +60,7 @@ def tilted_prolate(eps: float, n: int):
     return be, flow.steps, time.process_time() - c0
 
 
-def newton(be, phi0, pins, pinned: bool, linear: str = "auto") -> dict:
+def newton(be, phi0, pins, pinned: bool, linear: str = "coarse") -> dict:
     """Newton from ``phi0`` with the pins or without them (the pins' values measured by the
     pinned system's functionals ``pins`` in both), by the ``linear`` solver."""
     import numpy as np
@@ -104,8 +105,8 @@ def main(argv=None) -> dict:
               "flow_steps": steps, "flow_cpu_s": round(flow_s, 2), "pins": len(pins)}
     print(f"eps = {eps:g}, {n}^3 nodes of order 4: the flow to 1e-6 took {steps} steps, "
           f"{flow_s:.1f} s CPU; {len(pins)} pins", flush=True)
-    for name, pinned, linear in (("pinned", True, "auto"), ("P_alone", True, "minres"),
-                                 ("free", False, "auto")):
+    for name, pinned, linear in (("pinned", True, "coarse"), ("P_alone", True, "minres"),
+                                 ("free", False, "coarse")):
         r = result[name] = newton(be, phi0, pins, pinned, linear)
         spaces = "; ".join(f"a coarse space of {c['functions']} functions, {c['deflated']} "
                            f"deflated, in {c['seconds']} s" for c in r["coarse"])

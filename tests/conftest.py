@@ -9,6 +9,19 @@ import pytest
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _one_blas_thread_per_worker():
+    """One BLAS thread in each test process, as every run has (fem_ade.backends.threads):
+    two pytest workers share two cores, and the tests that call the solvers directly (3D
+    Newton, the eigen-solves) would otherwise run two threads each and oversubscribe them —
+    measured: tests/test_newton.py on two workers in 56 s, and in 272 s once."""
+    import scipy.linalg  # noqa: F401 (loads scipy's BLAS, so that the limit reaches it)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
 @pytest.fixture(autouse=True)
 def _seed():
     np.random.seed(0)

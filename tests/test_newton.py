@@ -294,3 +294,22 @@ def test_the_coarse_spaces_hessian_of_a_stack_is_the_hessian_vector_product(tilt
                 + st.constraint_hessian_vector(lin.phi, lin.Kphi, zi, lin.lam[0], lin.lam[1]))
         assert np.abs(gi - want).max() <= 1e-12 * np.abs(want).max()
     assert lin.lam[0] != 0.0 and lin.lam[1] != 0.0  # the constraints' part is in it
+
+
+def test_auto_adds_the_coarse_space_from_its_size(tilted, monkeypatch):
+    """linear="auto" adds the coarse space from COARSE_FROM nodes (where it pays), not at
+    32³; "coarse" and "minres" choose whatever the size; the axisymmetric geometry solves
+    directly."""
+    import fem_ade.backends.fem.newton as newton
+
+    be, _ = tilted
+    assert be.phi.size < newton.COARSE_FROM
+    assert not newton.NewtonSystem(be).uses_coarse
+    assert newton.NewtonSystem(be, "coarse").uses_coarse
+    monkeypatch.setattr(newton, "COARSE_FROM", be.phi.size)
+    assert newton.NewtonSystem(be).uses_coarse
+    assert not newton.NewtonSystem(be, "minres").uses_coarse
+    axi = make_backend("fem", vesicle_scene(v=0.9, branch="prolate", eps=0.04), n=48,
+                       geometry="axisymmetric", constraints="exact")
+    sys_ = newton.NewtonSystem(axi)
+    assert sys_.direct and not sys_.uses_coarse

@@ -45,7 +45,8 @@ What it costs: per smoothing step, H and P⁻¹ on the stack; then one product w
 Z H Zᵀ, Z P Zᵀ from Gram products (K is symmetric, so Zᵀ K W⁻¹ K Z = (KZ)ᵀ W⁻¹ (KZ) and
 Zᵀ K diag(α) Z = (KZ)ᵀ diag(α) Z); two k × N arrays (0.35 GB each at 64³, d = 5); and a
 product with V and Vᵀ per MINRES iteration, which at 32³ costs as much as P⁻¹ — the coarse
-space halves the iterations there but not the time; it pays from 64³ (studies/newton3d_bench.py).
+space halves the iterations there but not the time; the two break even at 48³ and it pays at
+64³ (studies/newton3d_bench.py; :data:`fem_ade.backends.fem.newton.COARSE_FROM`).
 """
 
 from __future__ import annotations

@@ -93,8 +93,15 @@ class NewtonResult:
 #: natural edges), ``coarse`` (MINRES preconditioned by the bulk Hessian's fast
 #: diagonalization and a coarse space of shape modes, :mod:`fem_ade.backends.fem.coarse`),
 #: ``minres`` (the bulk Hessian alone: any tensor space), ``auto`` (direct where it
-#: applies, coarse elsewhere)
+#: applies, elsewhere coarse from :data:`COARSE_FROM` nodes and minres below)
 LINEAR_SOLVERS = ("auto", "direct", "coarse", "minres")
+#: the nodes from which ``auto`` adds the coarse space. Measured on the tilted prolate of
+#: studies/newton3d_bench.py (one thread, Newton from the flow's 1e-6 stop, coarse against P
+#: alone): 32³, ε = 0.04: 1.64 s against 1.21 s; 48³, ε = 0.03: 4.85 s against 4.49 s (two
+#: solves; the space's 3.5 s of set-up is most of it); 64³, ε = 0.02: 18.55 s against 41.01 s.
+#: A continuation step at 32³ (tests/test_newton.py) takes the same time either way; the
+#: D2 branch's --follow at 32³ nodes of order 8, 1.2× longer with the space
+COARSE_FROM = 100_000
 
 
 class NewtonSystem:
@@ -123,7 +130,8 @@ class NewtonSystem:
             raise ModelError("the direct solver factors the Hessian of a 2D space with natural "
                              "edges (the axisymmetric geometry); use minres")
         self.direct = planar if linear == "auto" else linear == "direct"
-        self.uses_coarse = not planar if linear == "auto" else linear == "coarse"
+        self.uses_coarse = (not planar and space.n_dofs >= COARSE_FROM if linear == "auto"
+                            else linear == "coarse")
         self.coarse = None  # the coarse space in use (made by the first solve that needs one)
         self._K = None
 
