@@ -60,6 +60,15 @@ def threshold(params) -> float:
 MODES, EIGENVALUES = 8, 4
 #: where the directions off the constraints' tangent space are put in the 3D operator
 OFF_TANGENT = 10.0
+#: Lanczos vectors ARPACK keeps in the 3D eigen-solve (scipy's default: max(2k + 1, 20)).
+#: The lowest eigenvalues of a 3D state are shape modes clustered near 0 against a bulk
+#: spectrum of O(1), and a longer basis restarts less. Measured on the steady tilted prolate
+#: of studies/newton3d_bench.py at 64³, ε = 0.02 (k = 4, one thread; the eigenvalues equal to
+#: 1e-11): 20, 60, 100, 140, 200 vectors take 1802, 1305, 906, 782, 767 Hessian products and
+#: 127, 110, 83, 75, 80 s (beyond ~140 the orthogonalization costs more than it saves). At
+#: 32³, ε = 0.04, where a solve takes seconds, it does not pay: 20, 40, 80, 140, 160 vectors
+#: 1.9, 1.7, 2.9, 2.6, 1.6 s (ARPACK's restarts make it uneven)
+ARNOLDI_VECTORS = 140
 
 
 @dataclass
@@ -113,12 +122,13 @@ def axisymmetric(be, modes=range(MODES + 1), k: int = EIGENVALUES,
 
 
 def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
-              tol: float = 1e-9) -> Stability:
+              tol: float = 1e-9, ncv: int = ARNOLDI_VECTORS) -> Stability:
     """The ``k`` lowest eigenvalues of H_L v = λ P v of a 3D FEM state on {Cᵀv = 0}, C the
     constraints' gradients and P times each rigid motion (a negligible one — a rotation
     about a state's axis of symmetry — left out): ARPACK (regular mode, P⁻¹ by the fast
     diagonalization) on ΠᵀH_LΠ + σ_c C(CᵀP⁻¹C)⁻¹Cᵀ, Π the P-orthogonal projector on the
-    tangent space (the directions off it moved to σ_c = :data:`OFF_TANGENT`)."""
+    tangent space (the directions off it moved to σ_c = :data:`OFF_TANGENT`), with ``ncv``
+    Lanczos vectors (:data:`ARNOLDI_VECTORS`)."""
     import time
 
     from scipy.sparse.linalg import LinearOperator, eigsh
@@ -148,7 +158,8 @@ def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
     ops = [LinearOperator((N, N), matvec=f, dtype=float)
            for f in (H, P, lambda x: sys_.P_inverse(np.ravel(x)))]
     vals = eigsh(ops[0], k=k, M=ops[1], Minv=ops[2], which="SA", tol=tol,
-                 return_eigenvectors=False, v0=np.ones(N))
+                 ncv=min(N - 1, max(2 * k + 1, ncv)), return_eigenvectors=False,
+                 v0=np.ones(N))
     vals = np.sort(vals)
     out = Stability("cartesian", eigenvalues=list(vals),
                     unstable_3d=int(np.sum(vals < (threshold(be.params) if below is None

@@ -98,7 +98,7 @@ LINEAR_SOLVERS = ("auto", "direct", "coarse", "minres")
 #: the nodes from which ``auto`` adds the coarse space. Measured on the tilted prolate of
 #: studies/newton3d_bench.py (one thread, Newton from the flow's 1e-6 stop, coarse against P
 #: alone): 32³, ε = 0.04: 1.64 s against 1.21 s; 48³, ε = 0.03: 4.85 s against 4.49 s (two
-#: solves; the space's 3.5 s of set-up is most of it); 64³, ε = 0.02: 18.55 s against 41.01 s.
+#: solves; the space's 3.5 s of set-up is most of it); 64³, ε = 0.02: 18.97 s against 42.95 s.
 #: A continuation step at 32³ (tests/test_newton.py) takes the same time either way; the
 #: D2 branch's --follow at 32³ nodes of order 8, 1.2× longer with the space
 COARSE_FROM = 100_000
