@@ -91,6 +91,29 @@ def newton(be, phi0, pins, pinned: bool, linear: str = "coarse") -> dict:
             "centroid_moved": float(np.abs(centroid() - c0).max())}
 
 
+def stability(be) -> dict:
+    """The 4 lowest eigenvalues of the state's 3D stability and their CPU seconds with
+    ARPACK's default 20 Lanczos vectors and with :data:`fem_ade.campaigns.stability.
+    ARNOLDI_VECTORS`; the ratio and how far the eigenvalues differ."""
+    import numpy as np
+
+    from fem_ade.campaigns.stability import ARNOLDI_VECTORS, cartesian
+
+    stab = {"vectors": ARNOLDI_VECTORS}
+    for name, ncv in (("ncv_20", 20), (f"ncv_{ARNOLDI_VECTORS}", ARNOLDI_VECTORS)):
+        cpu = time.process_time()
+        values = cartesian(be, 4, ncv=ncv).eigenvalues
+        stab[name] = {"cpu_s": round(time.process_time() - cpu, 2),
+                      "eigenvalues": [float(x) for x in values]}
+        print(f"  3D stability, {ncv} Lanczos vectors: {stab[name]['cpu_s']} s CPU, "
+              f"lowest {', '.join(f'{x:.6e}' for x in values)}", flush=True)
+    old, new = stab["ncv_20"], stab[f"ncv_{ARNOLDI_VECTORS}"]
+    stab["speedup"] = round(old["cpu_s"] / new["cpu_s"], 2)
+    stab["eigenvalues_agree"] = float(np.max(np.abs(np.array(new["eigenvalues"])
+                                                    / np.array(old["eigenvalues"]) - 1)))
+    return stab
+
+
 def main(argv=None) -> dict:
     import numpy as np
 
@@ -124,27 +147,14 @@ def main(argv=None) -> dict:
     result["speedup"] = round(result["free"]["cpu_s"] / result["pinned"]["cpu_s"], 2)
     result["E_difference"] = result["free"]["E"] / result["pinned"]["E"] - 1
     result["target_s"] = TARGET_S
-    from fem_ade.campaigns.stability import ARNOLDI_VECTORS, cartesian
-
     be._set(coarse["phi"], None)
     for r in (plain, coarse, result["free"]):
         del r["phi"]
-    stab = result["stability"] = {}
-    for name, ncv in (("ncv_20", 20), (f"ncv_{ARNOLDI_VECTORS}", ARNOLDI_VECTORS)):
-        cpu = time.process_time()
-        values = cartesian(be, 4, ncv=ncv).eigenvalues
-        stab[name] = {"cpu_s": round(time.process_time() - cpu, 2),
-                      "eigenvalues": [float(x) for x in values]}
-        print(f"  3D stability, {ncv} Lanczos vectors: {stab[name]['cpu_s']} s CPU, "
-              f"lowest {', '.join(f'{x:.6e}' for x in values)}", flush=True)
-    old, new = stab["ncv_20"], stab[f"ncv_{ARNOLDI_VECTORS}"]
-    stab["speedup"] = round(old["cpu_s"] / new["cpu_s"], 2)
-    stab["eigenvalues_agree"] = float(np.max(np.abs(np.array(new["eigenvalues"])
-                                                    / np.array(old["eigenvalues"]) - 1)))
+    stab = result["stability"] = stability(be)
     print(f"  P alone / coarse space: {result['minres_ratio']}x the MINRES iterations "
           f"(target >= 5x), {result['coarse_speedup']}x the CPU; E differs by "
           f"{result['coarse_E_difference']:.2g}, phi by {result['coarse_phi_difference']:.2g}")
-    print(f"  3D stability: {stab['speedup']}x less CPU with {ARNOLDI_VECTORS} Lanczos vectors "
+    print(f"  3D stability: {stab['speedup']}x less CPU with {stab['vectors']} Lanczos vectors "
           f"than 20; the eigenvalues agree to {stab['eigenvalues_agree']:.1e}")
     print(f"  free / pinned: {result['speedup']}x the CPU; E free / pinned - 1 = "
           f"{result['E_difference']:.2g}; target (eps = 0.02, <= {TARGET_S:g} s): Newton "
