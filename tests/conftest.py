@@ -15,10 +15,9 @@ def _one_blas_thread_per_worker():
     two pytest workers share two cores, and the tests that call the solvers directly (3D
     Newton, the eigen-solves) would otherwise run two threads each and oversubscribe them —
     measured: tests/test_newton.py on two workers in 56 s, and in 272 s once."""
-    import scipy.linalg  # noqa: F401 (loads scipy's BLAS, so that the limit reaches it)
-    from threadpoolctl import threadpool_limits
+    from fem_ade.backends.threads import limited
 
-    with threadpool_limits(limits=1, user_api="blas"):
+    with limited():
         yield
 
 

@@ -57,8 +57,6 @@ import time
 
 import numpy as np
 
-from fem_ade.backends.fem.solve import global_dot
-
 #: the polynomials' total degree and the smoothing steps (:class:`CoarseSpace`); measured on the
 #: first Newton step of studies/newton3d_bench.py's tilted prolate at 64³, ε = 0.02 (one thread;
 #: 389 MINRES iterations with P alone, 13 s; ``cut`` 0.5): unsmoothed d = 4, 5, 6, 7: 94, 78, 55,
@@ -146,16 +144,15 @@ class CoarseSpace:
         Z = shape_functions(space, lin.phi, sys_.params.eps, degree)
         self.size = Z.shape[0]
         C = np.array(lin.C)
-        PC = np.array([sys_.P_inverse(c) for c in C])
-        S = np.array([[global_dot(ci, pj) for pj in PC] for ci in C])
+        PC, S = sys_.constraint_block(lin.C)
+        PC = np.array(PC)
         Z -= np.linalg.solve(S, C @ Z.T).T @ PC
         a, c, ke = sys_.bulk()
         co = sys_.step.hessian_coefficients(lin.phi, lin.mu, lin.Kphi, lin.lam[0], lin.lam[1])
         for _ in range(smooth):
             for i in range(0, len(Z), CHUNK):
                 z = Z[i:i + CHUNK]
-                Z[i:i + CHUNK] = z - sys_.basis.apply(hessian(space, ke, co, z),
-                                                      sys_.P_inverse_symbol)
+                Z[i:i + CHUNK] = z - sys_.P_inverse(hessian(space, ke, co, z))
             Z -= np.linalg.solve(S, C @ Z.T).T @ PC
         KZ = np.empty_like(Z)
         for i in range(0, len(Z), CHUNK):

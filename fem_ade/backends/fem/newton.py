@@ -249,7 +249,17 @@ class NewtonSystem:
 
     # -- linear algebra ----------------------------------------------------------------------
     def P_inverse(self, x: np.ndarray) -> np.ndarray:
-        return self.basis.apply(np.asarray(x)[None], self.P_inverse_symbol)[0]
+        """P⁻¹x, for a vector or a stack of them (k × N)."""
+        x = np.asarray(x)
+        if x.ndim == 2:
+            return self.basis.apply(x, self.P_inverse_symbol)
+        return self.basis.apply(x[None], self.P_inverse_symbol)[0]
+
+    def constraint_block(self, C: list[np.ndarray]) -> tuple[list[np.ndarray], np.ndarray]:
+        """(P⁻¹cᵢ for each constraint gradient cᵢ, S = CᵀP⁻¹C): the constraints' block of the
+        bordered system's preconditioner, and the metric of :meth:`multipliers`."""
+        PC = [self.P_inverse(c) for c in C]
+        return PC, np.array([[global_dot(ci, pj) for pj in PC] for ci in C])
 
     def coarse_space(self, lin: Linearization):
         """The coarse space for MINRES at ``lin``: the one in use, or a new one made at ``lin``
@@ -265,8 +275,7 @@ class NewtonSystem:
 
     def multipliers(self, g: np.ndarray, C: list[np.ndarray]) -> np.ndarray:
         """The λ that minimise ‖∇E + Cλ‖ in the P⁻¹ norm."""
-        PC = [self.P_inverse(c) for c in C]
-        G = np.array([[global_dot(ci, pj) for pj in PC] for ci in C])
+        PC, G = self.constraint_block(C)
         return np.linalg.solve(G, [-global_dot(g, pj) for pj in PC])
 
 
@@ -314,8 +323,7 @@ def kkt_solve(sys_: NewtonSystem, lin: Linearization, rhs: np.ndarray,
         return np.column_stack([x for x, _ in out]), sum(its for _, its in out)
     step, C = sys_.step, lin.C
     N = lin.phi.size
-    PC = [sys_.P_inverse(c) for c in C]
-    S_inv = np.linalg.inv(np.array([[global_dot(ci, pj) for pj in PC] for ci in C]))
+    S_inv = np.linalg.inv(sys_.constraint_block(C)[1])
 
     def kkt(x):
         v, nu = x[:N], x[N:]
