@@ -56,14 +56,16 @@ MAX_NEWTON, GROW_BELOW = 12, 4
 # :func:`fem_ade.campaigns.stability.threshold`)
 EIGENVALUES = 4
 #: a Newton correction is converged when its decrement |∇Lᵀδφ|/|E| (relative energy, as in
-#: :func:`fem_ade.backends.fem.newton.solve_steady`) is below this and its |δp| below 1e-9·max(|p|,
-# 1),
-#: and
+#: :func:`fem_ade.backends.fem.newton.solve_steady`) is below NEWTON_TOL and its |δp| below
+#: PARAMETER_TOL·max(|p|, 1) — the error left after a step of the quadratic phase is of the
+#: order of the step's square: measured on the prolate at v = 0.75, ε = 0.005 (Δa₀ from 0.8),
+#: |δp| 1.5e-4, 3.8e-6, 2.1e-9, 2.0e-13 in the last four iterations, so a bound of 1e-9 (as
+#: before) took a sixth Newton iteration, a factorization, to move p by 2e-13 — and
 #: given up (a shorter step is tried) once its residual exceeds DIVERGED times its first: a
 #: diverging correction's bordered solves take the most MINRES iterations (5000 at eps =
 #: 0.005, where converging ones take 250-500); the converging ones measured there stay below
 #: their first residual
-NEWTON_TOL, DIVERGED = 1e-12, 2.0
+NEWTON_TOL, PARAMETER_TOL, DIVERGED = 1e-12, 1e-7, 2.0
 #: the least arclength step, relative to the parameter's size: below it the parameter's
 #: derivative (a central difference) and the predictor's chords are round-off
 MIN_STEP = 1e-6
@@ -235,7 +237,7 @@ class Continuation:
             if not np.all(np.isfinite(phi)) or np.max(np.abs(phi)) > 2.0:
                 return None
             decrement = abs(global_dot(lin.grad, dphi)) / max(abs(lin.E), 1e-300)
-            if decrement < NEWTON_TOL and abs(dp) < 1e-9 * max(abs(p), 1.0):
+            if decrement < NEWTON_TOL and abs(dp) < PARAMETER_TOL * max(abs(p), 1.0):
                 phi = self.sys.restore(phi)
                 return (phi, p, it) if phi is not None else None
         return None
