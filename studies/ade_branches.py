@@ -140,14 +140,17 @@ def line_sizes(base: Path, v_list, eps: float, branches) -> dict:
     return known
 
 
-def line_key(v: float, branch: str, name: str, span, R0: float, eps: float, step) -> dict:
+def line_key(v: float, branch: str, name: str, span, R0: float, eps: float, step,
+             **more) -> dict:
     """What a phase-field line is (its archived rows are reused only for the same): the
     branch followed in Δa₀ over ``span`` at v, R₀, ε and κ̄, its step, and the model's
-    physics version."""
+    physics version; ``more``: what else a study's lines are followed with (``modes``, the
+    branch code's ``version``; this study's lines have neither: version 1, e4098a1)."""
     from fem_ade.model.params import PHYSICS_VERSION
 
     return {"v": v, "branch": branch, "line": name, "from": span[0], "to": span[1],
-            "R0": R0, "eps": eps, "kbar": KBAR, "step": step, "physics": PHYSICS_VERSION}
+            "R0": R0, "eps": eps, "kbar": KBAR, "step": step, "physics": PHYSICS_VERSION,
+            **more}
 
 
 def line_point(key: dict) -> dict:
@@ -155,7 +158,7 @@ def line_point(key: dict) -> dict:
     start, or the pear's seed (:func:`fem_ade.scenes.pear.pear_scene`, by continuation where
     it must) as the point's own scene; ModelError where the pear has none."""
     branch = {"param": "da0", "from": key["from"], "to": key["to"], "step": key["step"],
-              "folds": 0}
+              "folds": 0, "modes": key.get("modes", 0)}
     spec = {"name": line_name(key["v"], key["line"]), "seed": key["branch"],
             "branch": branch, "base": "vesicle",
             "scene": {"v": key["v"], "kbar": KBAR, "eps": key["eps"], "R0": key["R0"]}}

@@ -68,6 +68,29 @@ def check_branches(result, out):
     assert (out / "branches_quick.md").is_file() and (out / "branches_quick.png").is_file()
 
 
+def check_ade_limit(result, out):
+    """ade_branches.py --quick's line (prolate and oblate at v = 0.85, eps = 0.04) refined
+    at eps = 0.02 from Δa₀ = 1.1 up and down to the grid's 1.04 and 1.16: no crossing at
+    either ε, the two cells judged by their branches' extrapolated energies (the
+    prolate, as the sharp one), each extrapolation the p = 2 formula of the two ε's
+    energies; the refined lines archived with the branch code's version; the report
+    written."""
+    (t,) = result["transitions"]
+    assert t["coarse"] is None and t["fine"] is None and t["limit"] is None, t
+    inside = [c for c in result["cells"] if c["how"] == "extrapolated"]
+    assert [c["da0"] for c in inside] == [1.04, 1.16], result["cells"]
+    for c in inside:
+        assert c["limit"] == c["sharp"] == "prolate", c
+        for e in c["e"].values():
+            assert e["coarse"] and e["fine"], c
+            assert math.isclose(e["limit"], e["fine"] + (e["fine"] - e["coarse"]) / 3)
+    assert result["agree"] == len(result["cells"]) == 2, result
+    lines = json.loads((out / "ade_limit_quick" / "lines.json").read_text())
+    assert len(lines) == 4 and all(x["key"]["version"] == 2 and x["rows"]
+                                   for x in lines.values()), lines
+    assert (out / "ade_limit_quick.md").is_file()
+
+
 def check_ade_branches(result, out):
     """One line at v = 0.85, eps = 0.04: the prolate and the oblate followed in Δa₀ over
     1.04 … 1.16, the prolate the lowest at both grid points as the sharp one is; the report

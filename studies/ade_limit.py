@@ -1,0 +1,392 @@
+"""The ADE plane at ε → 0 (issue 42): the transitions of ``studies/ade_branches.py``'s lines
+(κ̄/κ = 1.4, ε = 0.01) followed again at ε = 0.005 near where they are, each extrapolated in
+ε, and the plane's cells near them judged at ε → 0.
+
+* **Where.** On each line of fixed v, every transition between two branches that cross (the
+  phase field's at ε = 0.01, and the sharp membrane's where the phase field had none there):
+  both branches followed at ε = 0.005 (the same R₀ as the line's, so ε/R₀ halves) up and down
+  from the crossing predicted at ε = 0.005 — x₀.₀₁ + ¾ (x_sharp − x₀.₀₁), the p = 2 guess — to
+  ``WINDOW`` either side. Where the sharp membrane has a pear, the pear and the prolate
+  from the sharp pear's least m₀ up to the grid's end and down by ``WINDOW`` (the pear at
+  Δa₀ = 1.64 budded off at ε = 0.01: does it at 0.005?).
+* **Crossings.** Each branch's points there (up to its first fold, while they are the
+  branch: ``ade_branches.kept``), e as a cubic spline in Δa₀, the crossing the root of the
+  difference nearest the window's centre (Brent) — the same for ε = 0.01 from its lines.
+* **Extrapolation.** x₀ = x₀.₀₀₅ + (x₀.₀₀₅ − x₀.₀₁)/(2² − 1): the order is **assumed** (p = 2:
+  the sharp-limit study measured 1.77–1.88 on three transitions and 2.01–2.25 on 13 energies,
+  ``sharp_limit.md``); it is not measured here, two ε give none.
+* **Cells.** A grid cell inside a refined span is judged by the branches' energies
+  extrapolated the same way, e₀ = e₀.₀₀₅ + (e₀.₀₀₅ − e₀.₀₁)/3, the lowest of those that exist at
+  both ε; a branch that exists there at ε = 0.005 only (the pear at 1.64) competes with its
+  ε = 0.005 energy against the others' at ε = 0.005, and the cell says so. A cell outside
+  every span keeps its ε = 0.01 verdict (it is ≥ ``WINDOW`` from every crossing).
+
+The lines are one branch sweep, as ``ade_branches.py``'s: ``OUT/ade_limit/sweep`` (resumable;
+each line archived in ``OUT/ade_limit/lines.json`` once the sweep ends). Needs
+``OUT/ade_branches.json`` and ``OUT/ade_branches/`` (``ade_branches.py`` run first).
+
+Writes ``OUT/ade_limit.md`` (with the hand-written ``OUT/ade_limit_notes.md``) and
+``OUT/ade_limit.json``.
+
+    python studies/ade_limit.py --out studies/results        # ~40 min on 2 cores
+    python studies/ade_limit.py --out studies/results --report-only
+    python studies/ade_limit.py --quick      # the code: ade_branches.py --quick, refined at 0.02
+
+One BLAS thread and one FFT worker per process.
+"""
+
+from __future__ import annotations
+
+from _lib.cli import one_thread, study_parser
+
+one_thread()
+
+import json  # noqa: E402
+from pathlib import Path  # noqa: E402
+from types import SimpleNamespace  # noqa: E402
+
+import ade_branches as ab  # noqa: E402
+
+OUT = Path("runs") / "studies"
+EPS = 0.005
+#: how far either side of a predicted crossing both branches are followed (the sharp and
+#: the ε = 0.01 crossings are up to 0.048 apart: the torus → prolate at v = 0.6)
+WINDOW = 0.05
+#: the order in ε assumed for the extrapolation (module docstring)
+ORDER = 2
+#: the branch code the refined lines are followed with, in their archive's key: 2 since the
+#: continuation's predictor, its stability without the translation mode and its convergence
+#: test (``ade_branches.py``'s lines at ε = 0.01 were followed with version 1, e4098a1; their
+#: converged points are steady states either way, the same to Newton's tolerance)
+LINE_VERSION = 2
+#: the plane's settings (``ade_branches.py``'s) and this study's
+FULL = SimpleNamespace(eps=EPS, window=WINDOW, coarse=SimpleNamespace(
+    eps=ab.EPS, v=ab.V, branches=ab.BRANCHES, step=ab.STEP, quick=False))
+#: --quick: ``ade_branches.py --quick``'s line (v = 0.85 at ε = 0.04, prolate and oblate over
+#: Δa₀ 1.04 … 1.16, no transition) refined at ε = 0.02 in one span of its pair
+QUICK = SimpleNamespace(eps=0.02, window=0.06, centre=1.1, coarse=SimpleNamespace(
+    eps=ab.QUICK.eps, v=ab.QUICK.v, branches=ab.QUICK.branches, step=ab.QUICK.step,
+    quick=True))
+
+
+def predicted(x_pf: float | None, x_sharp: float | None) -> float:
+    """Where a crossing is expected at ε = 0.005: ε = 0.01's moved ¾ of the way to the
+    sharp one (order 2), or whichever of the two is known."""
+    if x_pf is None:
+        return x_sharp
+    if x_sharp is None:
+        return x_pf
+    return x_pf + (1.0 - 0.5**ORDER) * (x_sharp - x_pf)
+
+
+def regions(coarse: dict, sharp: dict) -> list[dict]:
+    """The spans refined at ε = 0.005: {v, branches, centre, span, x_pf, x_sharp}. The pear's
+    span covers its crossing with the prolate, so that pair has no window of its own."""
+    out = []
+    for line in coarse["lines"]:
+        v = line["v"]
+        pear = sharp[v].get("pear") or []
+        pairs = {}
+        for side in ("pf", "sharp"):
+            for t in line[side]:
+                key = frozenset((t["from"], t["to"]))
+                if t["da0"] is None or (pear and key == {"prolate", "pear"}):
+                    continue
+                pairs.setdefault(key, {"from": t["from"], "to": t["to"]})[side] = t["da0"]
+        for p in pairs.values():
+            x = predicted(p.get("pf"), p.get("sharp"))
+            out.append({"v": v, "branches": (p["from"], p["to"]), "centre": round(x, 3),
+                        "span": (round(x - WINDOW, 3), round(x + WINDOW, 3)),
+                        "x_pf": p.get("pf"), "x_sharp": p.get("sharp")})
+        if pear:
+            start = round(pear[0]["m0"] + ab.PEAR_INSIDE, 3)
+            x_pf = [t["da0"] for t in line["pf"] if {t["from"], t["to"]} == {"prolate", "pear"}
+                    and t["da0"] is not None]
+            x_sh = [t["da0"] for t in line["sharp"]
+                    if {t["from"], t["to"]} == {"prolate", "pear"} and t["da0"] is not None]
+            out.append({"v": v, "branches": ("prolate", "pear"), "centre": start,
+                        "span": (round(start - WINDOW, 3), ab.DEFAULT_SPAN[1]),
+                        "x_pf": x_pf[0] if x_pf else None, "x_sharp": x_sh[0] if x_sh else None})
+    return out
+
+
+def quick_regions() -> list[dict]:
+    c = QUICK.centre
+    return [{"v": QUICK.coarse.v[0], "branches": ("oblate", "prolate"), "centre": c,
+             "span": (c - QUICK.window, c + QUICK.window), "x_pf": None, "x_sharp": None}]
+
+
+def region_keys(reg: dict, R0: float, cfg=FULL) -> list[dict]:
+    """The lines of one refined span: each branch up and down from its centre."""
+    keys = []
+    for b in reg["branches"]:
+        for name, span in ((f"{b}@{reg['centre']:.3f}-up", (reg["centre"], reg["span"][1])),
+                           (f"{b}@{reg['centre']:.3f}-down",
+                            (reg["centre"], reg["span"][0]))):
+            keys.append(ab.line_key(reg["v"], b, name, span, R0, cfg.eps, cfg.coarse.step,
+                                    modes=0, version=LINE_VERSION))
+    return keys
+
+
+# ---------------------------------------------------------------------------------------------
+# crossings and energies
+# ---------------------------------------------------------------------------------------------
+def curve(rows: list[dict]):
+    """e(Δa₀) along one branch's points: a cubic spline (linear through two or three
+    points), with its range; None for fewer than two points."""
+    import numpy as np
+    from scipy.interpolate import CubicSpline, interp1d
+
+    pts = sorted({round(r["da0"], 12): r["e"] for r in rows}.items())
+    if len(pts) < 2:
+        return None
+    xs, ys = map(np.array, zip(*pts, strict=True))
+    f = CubicSpline(xs, ys) if len(pts) >= 4 else interp1d(xs, ys)
+    return f, float(xs[0]), float(xs[-1])
+
+
+def cross(a, b, centre: float) -> float | None:
+    """The root of e_a − e_b nearest ``centre`` where both curves are defined (Brent on each
+    sign change of a fine sampling), None where they do not cross."""
+    import numpy as np
+    from scipy.optimize import brentq
+
+    if a is None or b is None:
+        return None
+    lo, hi = max(a[1], b[1]), min(a[2], b[2])
+    if not lo < hi:
+        return None
+    xs = np.linspace(lo, hi, 401)
+    d = a[0](xs) - b[0](xs)
+    roots = [float(brentq(lambda x: float(a[0](x) - b[0](x)), xs[i], xs[i + 1]))
+             for i in range(len(xs) - 1) if d[i] == 0.0 or d[i] * d[i + 1] < 0]
+    return min(roots, key=lambda x: abs(x - centre)) if roots else None
+
+
+def at(c, x: float) -> float | None:
+    return None if c is None or not c[1] - 1e-9 <= x <= c[2] + 1e-9 else float(c[0](x))
+
+
+def extrapolate(fine: float | None, coarse: float | None) -> float | None:
+    """The ε → 0 value from ε = 0.005 and 0.01 at the assumed order."""
+    if fine is None or coarse is None:
+        return None
+    return fine + (fine - coarse) / (2**ORDER - 1)
+
+
+def coarse_rows(v: float, b: str, sharp_rows: dict, keys01: list[dict], archive01: dict):
+    """A branch's kept points at ε = 0.01 (the ADE-lines study's lines of it at v)."""
+    res = {"lines": []}
+    for key in keys01:
+        if key["v"] == v and key["branch"] == b:
+            got = archive01.get(ab.line_name(v, key["line"]))
+            if got and got["key"] == key:
+                res["lines"].append({"rows": got["rows"]})
+    return ab.kept_lines(res, b, sharp_rows)
+
+
+def fine_rows(reg: dict, b: str, sharp_rows: dict, archive: dict, R0: float, cfg=FULL):
+    """A branch's kept points at ε = 0.005 in one refined span (its up and down lines); and
+    why a line has none."""
+    rows, missing = [], []
+    for key in region_keys(reg, R0, cfg):
+        if key["branch"] != b:
+            continue
+        got = archive.get(ab.line_name(reg["v"], key["line"]))
+        if not got or got["key"] != key:
+            missing.append(f"{key['line']}: not followed")
+            continue
+        if got["missing"]:
+            missing.append(f"{key['line']}: {got['missing']}")
+        kept = ab.kept(got["rows"], b, sharp_rows)
+        if got["rows"] and not kept:
+            first = got["rows"][0]
+            missing.append(f"{key['line']}: its seed became a {first['label']}")
+        rows += kept
+    return sorted({round(r["da0"], 12): r for r in rows}.values(), key=lambda r: r["da0"]), \
+        missing
+
+
+# ---------------------------------------------------------------------------------------------
+# the study
+# ---------------------------------------------------------------------------------------------
+def main(argv=None) -> dict:
+    ap = study_parser(__doc__, OUT, quick="ade_branches.py --quick's line refined at "
+                      "eps = 0.02", workers="", report_only="from the archived lines; "
+                      "follow nothing")
+    args = ap.parse_args(argv)
+    from fem_ade.store.output import write_json_atomic
+
+    cfg, suffix = (QUICK, "_quick") if args.quick else (FULL, "")
+    co = cfg.coarse
+    if args.quick and not args.report_only:  # the plane's quick line first
+        ab.main(["--quick", "--out", str(args.out), "--workers", str(args.workers)])
+    base01, base = args.out / f"ade_branches{suffix}", args.out / f"ade_limit{suffix}"
+    coarse = json.loads((args.out / f"ade_branches{suffix}.json").read_text())
+    sharp = ab.archived_sharp(base01, co.v, co.branches)
+    R0 = ab.archived_sizes(base01, co.v)
+    # the spans are fixed at the first run: remaking ε = 0.01's report cannot rename lines
+    path = base / "regions.json"
+    if path.is_file():
+        regs = json.loads(path.read_text())
+    else:
+        regs = quick_regions() if args.quick else regions(coarse, sharp)
+        write_json_atomic(path, regs, make_folder=True)
+    keys = [k for reg in regs for k in region_keys(reg, R0[reg["v"]], cfg)]
+    archive_path = base / "lines.json"
+    archive = json.loads(archive_path.read_text()) if archive_path.is_file() else {}
+    if not args.report_only:
+        ab.run_lines(base, keys, archive, args.workers)
+    spans01 = {(v, b): ab.line_spans(b, sharp[v].get(b, []), co.quick)
+               for v in co.v for b in co.branches}
+    keys01 = [ab.line_key(v, b, name, span, R0[v], co.eps, co.step)
+              for (v, b), lines in spans01.items() for name, span in lines]
+    archive01 = json.loads((base01 / "lines.json").read_text())
+    result = judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg)
+    result["seconds"] = {
+        "fine": round(sum(archive.get(ab.line_name(k["v"], k["line"]), {})
+                          .get("seconds") or 0.0 for k in keys), 1),
+        "coarse": coarse.get("line_seconds")}
+    write_json_atomic(args.out / f"ade_limit{suffix}.json", result)
+    write_report(args.out, result, suffix)
+    print(f"at eps -> 0 the lowest branch is the sharp one's at {result['agree']} of "
+          f"{len(result['cells'])} cells")
+    return result
+
+
+def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dict:
+    """The refined transitions and the cells, from both ε's lines."""
+    curves = {}  # (v, branch, "coarse" | region index) -> curve
+    fine_eps, coarse_eps = f"ε = {cfg.eps:g}", f"ε = {cfg.coarse.eps:g}"
+    outside = f"{coarse_eps} (outside the refined spans)"
+
+    def sharp_rows(v):
+        return {b: rows for b, rows in sharp[v].items() if rows}
+
+    def c01(v, b):
+        if (v, b, "coarse") not in curves:
+            curves[(v, b, "coarse")] = curve(coarse_rows(v, b, sharp_rows(v), keys01,
+                                                         archive01))
+        return curves[(v, b, "coarse")]
+
+    transitions, notes = [], []
+    for i, reg in enumerate(regs):
+        v, (a, b) = reg["v"], reg["branches"]
+        fine = {}
+        for br in (a, b):
+            rows, missing = fine_rows(reg, br, sharp_rows(v), archive, R0[v], cfg)
+            curves[(v, br, i)] = fine[br] = curve(rows)
+            notes += [f"v = {v:g}, {m}" for m in missing]
+        x01 = cross(c01(v, a), c01(v, b), reg["centre"])
+        x005 = cross(fine[a], fine[b], reg["centre"])
+        x0 = extrapolate(x005, x01)
+        transitions.append({"v": v, "from": a, "to": b, "centre": reg["centre"],
+                            "coarse": x01, "fine": x005, "limit": x0,
+                            "sharp": reg["x_sharp"],
+                            "error": None if x0 is None or reg["x_sharp"] is None
+                            else x0 - reg["x_sharp"], "torus": "torus" in (a, b)})
+    cells = []
+    for p in coarse["points"]:
+        v, x = p["v"], p["da0"]
+        inside = [i for i, r in enumerate(regs) if r["v"] == v
+                  and min(r["span"]) - 1e-9 <= x <= max(r["span"]) + 1e-9]
+        branches = sorted({br for i in inside for br in regs[i]["branches"]})
+        cell = {"v": v, "da0": x, "coarse": p["pf"], "sharp": p["sharp"],
+                "limit": p["pf"], "how": outside, "e": {}}
+        if inside and p["pf"] in branches:
+            e = {}
+            for br in branches:
+                fine = [at(curves[(v, br, i)], x) for i in inside if br in regs[i]["branches"]]
+                fine = [f for f in fine if f is not None]
+                e[br] = {"coarse": at(c01(v, br), x),
+                         "fine": fine[0] if fine else None}
+                e[br]["limit"] = extrapolate(e[br]["fine"], e[br]["coarse"])
+            cell["e"] = e
+            both = {br: d["limit"] for br, d in e.items() if d["limit"] is not None}
+            only = {br: d["fine"] for br, d in e.items()
+                    if d["limit"] is None and d["fine"] is not None}
+            fine_all = {br: d["fine"] for br, d in e.items() if d["fine"] is not None}
+            if only and min(fine_all, key=fine_all.get) in only:
+                cell["limit"] = min(fine_all, key=fine_all.get)
+                cell["how"] = f"{fine_eps} (its branch does not exist there at {coarse_eps})"
+            elif both:
+                cell["limit"] = min(both, key=both.get)
+                cell["how"] = "extrapolated"
+            else:
+                cell["how"] = f"{coarse_eps} (no branch at both ε here)"
+        elif inside:
+            cell["how"] = f"{coarse_eps} (its lowest is not of the refined pair)"
+        cells.append(cell)
+    agree = sum(c["limit"] == c["sharp"] for c in cells if c["sharp"])
+    agree01 = sum(c["coarse"] == c["sharp"] for c in cells if c["sharp"])
+    return {"eps": cfg.eps, "coarse_eps": cfg.coarse.eps, "order": ORDER,
+            "window": cfg.window, "regions": regs,
+            "transitions": transitions, "cells": cells, "agree": agree, "agree_coarse": agree01,
+            "notes": notes}
+
+
+def _f(x, digits=4):
+    return "—" if x is None else f"{x:.{digits}f}"
+
+
+def write_report(out: Path, result: dict, suffix: str = "") -> None:
+    from _lib.cli import write_report as write
+
+    cells, ts = result["cells"], result["transitions"]
+    f, c = f"{result['eps']:g}", f"{result['coarse_eps']:g}"
+    refined = sum(x["how"] != f"ε = {c} (outside the refined spans)" for x in cells)
+    lines = ["# The ADE plane at ε → 0", "",
+             "Written by `studies/ade_limit.py`: the transitions of the ADE plane's lines "
+             f"(κ̄/κ = 1.4, `ade_branches.md`, ε = {c}) followed again at ε = {f} within "
+             f"±{result['window']:g} in Δa₀ of where they were expected (each line's R₀ "
+             "kept, so ε/R₀ halves), and extrapolated in ε with the order **assumed** "
+             f"p = {result['order']} (x₀ = x_fine + (x_fine − x_coarse)/3; two ε measure no "
+             "order).",
+             "",
+             f"**At ε → 0 the lowest branch is the sharp one's at {result['agree']} of "
+             f"{len(cells)} cells** ({result['agree_coarse']} at ε = {c}); {refined} cells lie "
+             f"in a refined span and were judged from both ε, the others keep ε = {c}'s "
+             "verdict.", "",
+             "## The transitions", "",
+             f"| v | transition | ε = {c} | ε = {f} | ε → 0 | sharp | ε → 0 − sharp |",
+             "|---|---|---|---|---|---|---|"]
+    for t in ts:
+        err = "—" if t["error"] is None else f"{t['error']:+.4f}"
+        lines.append(f"| {t['v']:g} | {t['from']} → {t['to']} | {_f(t['coarse'])} | "
+                     f"{_f(t['fine'])} | {_f(t['limit'])} | {_f(t['sharp'])} | {err} |")
+    genus0 = [abs(t["error"]) for t in ts if t["error"] is not None and not t["torus"]]
+    torus = [abs(t["error"]) for t in ts if t["error"] is not None and t["torus"]]
+    lines += ["", f"Extrapolated against sharp: {len(genus0)} genus-0 transitions, largest "
+              f"|error| {_f(max(genus0) if genus0 else None)}; {len(torus)} with the torus, "
+              f"largest {_f(max(torus) if torus else None)}. — : the two branches do not "
+              "cross where both were followed at that ε.", "",
+              "## The cells at ε → 0", "",
+              "| v \\ Δa₀ | " + " | ".join(f"{a:g}" for a in sorted({x['da0'] for x in cells}))
+              + " |", "|---|" + "---|" * len({x["da0"] for x in cells})]
+    for v in sorted({x["v"] for x in cells}, reverse=True):
+        row = []
+        for x in sorted((x for x in cells if x["v"] == v), key=lambda x: x["da0"]):
+            mark = " ⁰" if x["how"] == "extrapolated" else \
+                " ⁵" if x["how"].startswith(f"ε = {f} ") else ""
+            text = x["limit"] or "—"
+            if x["sharp"] and x["limit"] != x["sharp"]:
+                text += f" / {x['sharp']} ✗"
+            row.append(text + mark)
+        lines.append(f"| {v:g} | " + " | ".join(row) + " |")
+    lines += ["", "A cell names the lowest branch at ε → 0 (where it differs from the sharp "
+              "one's: phase field / sharp ✗); ⁰: judged by the branches' energies "
+              f"extrapolated from ε = {c} and {f}; ⁵: by ε = {f}'s energies (a branch "
+              f"there at ε = {f} only); unmarked: ε = {c}'s verdict (outside every refined "
+              "span, or its lowest branch not of the span's pair).", ""]
+    if result["notes"]:
+        lines += [f"Lines at ε = {f} that gave no points of their branch:", ""]
+        lines += [f"- {n}" for n in result["notes"]] + [""]
+    s = result["seconds"]
+    lines.append(f"Branch runs: {s['fine']:g} s at ε = {f} (the refined lines) and "
+                 f"{s['coarse']:g} s at ε = {c} (the plane's lines), each line's own time on "
+                 "one BLAS thread, two lines at a time.")
+    write(out, f"ade_limit{suffix}", lines)
+
+
+if __name__ == "__main__":
+    main()
