@@ -18,8 +18,11 @@
 * **Cells.** A grid cell inside a refined span is judged by the branches' energies
   extrapolated the same way, e₀ = e₀.₀₀₅ + (e₀.₀₀₅ − e₀.₀₁)/3, the lowest of those that exist at
   both ε; a branch that exists there at ε = 0.005 only (the pear at 1.64) competes with its
-  ε = 0.005 energy against the others' at ε = 0.005, and the cell says so. A cell outside
-  every span keeps its ε = 0.01 verdict (it is ≥ ``WINDOW`` from every crossing).
+  ε = 0.005 energy against the others' at ε = 0.005, and the cell says so; a branch whose
+  seed became another shape there at ε = 0.005 (no point of it) is absent. A cell that a
+  branch's ε = 0.005 line did not reach (it ended before: Newton did not converge) keeps its
+  ε = 0.01 verdict and says why, as does a cell outside every span (≥ ``WINDOW`` from every
+  predicted crossing).
 
 The lines are one branch sweep, as ``ade_branches.py``'s: ``OUT/ade_limit/sweep`` (resumable;
 each line archived in ``OUT/ade_limit/lines.json`` once the sweep ends). Needs
@@ -294,10 +297,12 @@ def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dic
         cell = {"v": v, "da0": x, "coarse": p["pf"], "sharp": p["sharp"],
                 "limit": p["pf"], "how": outside, "e": {}}
         if inside and p["pf"] in branches:
-            e = {}
+            e, unreached = {}, []
             for br in branches:
-                fine = [at(curves[(v, br, i)], x) for i in inside if br in regs[i]["branches"]]
-                fine = [f for f in fine if f is not None]
+                have = [curves[(v, br, i)] for i in inside if br in regs[i]["branches"]]
+                fine = [f for f in (at(c, x) for c in have) if f is not None]
+                if not fine and any(c is not None for c in have):
+                    unreached.append(br)
                 e[br] = {"coarse": at(c01(v, br), x),
                          "fine": fine[0] if fine else None}
                 e[br]["limit"] = extrapolate(e[br]["fine"], e[br]["coarse"])
@@ -306,7 +311,10 @@ def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dic
             only = {br: d["fine"] for br, d in e.items()
                     if d["limit"] is None and d["fine"] is not None}
             fine_all = {br: d["fine"] for br, d in e.items() if d["fine"] is not None}
-            if only and min(fine_all, key=fine_all.get) in only:
+            if unreached:  # followed at the finer ε, but not to this cell: not judged
+                cell["how"] = (f"{coarse_eps} ({', '.join(unreached)} followed at {fine_eps} "
+                               "but not to this cell)")
+            elif only and min(fine_all, key=fine_all.get) in only:
                 cell["limit"] = min(fine_all, key=fine_all.get)
                 cell["how"] = f"{fine_eps} (its branch does not exist there at {coarse_eps})"
             elif both:
@@ -325,6 +333,21 @@ def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dic
             "notes": notes}
 
 
+#: the least |x − x_sharp| from which :func:`observed_order` is computed (the sharp crossings
+#: are known to ~5e-4 at worst: ``sharp_limit.md``; here to the m₀ grid's interpolation)
+ORDER_FLOOR = 2e-4
+
+
+def observed_order(t: dict) -> float | None:
+    """The order in ε that a transition's two crossings show against the sharp one."""
+    import math
+
+    if None in (t["coarse"], t["fine"], t["sharp"]):
+        return None
+    a, b = abs(t["coarse"] - t["sharp"]), abs(t["fine"] - t["sharp"])
+    return math.log2(a / b) if min(a, b) > ORDER_FLOOR else None
+
+
 def _f(x, digits=4):
     return "—" if x is None else f"{x:.{digits}f}"
 
@@ -334,7 +357,9 @@ def write_report(out: Path, result: dict, suffix: str = "") -> None:
 
     cells, ts = result["cells"], result["transitions"]
     f, c = f"{result['eps']:g}", f"{result['coarse_eps']:g}"
-    refined = sum(x["how"] != f"ε = {c} (outside the refined spans)" for x in cells)
+    extrapolated = sum(x["how"] == "extrapolated" for x in cells)
+    only = sum(x["how"].startswith(f"ε = {f} ") for x in cells)
+    unreached = sum("but not to this cell" in x["how"] for x in cells)
     lines = ["# The ADE plane at ε → 0", "",
              "Written by `studies/ade_limit.py`: the transitions of the ADE plane's lines "
              f"(κ̄/κ = 1.4, `ade_branches.md`, ε = {c}) followed again at ε = {f} within "
@@ -344,22 +369,29 @@ def write_report(out: Path, result: dict, suffix: str = "") -> None:
              "order).",
              "",
              f"**At ε → 0 the lowest branch is the sharp one's at {result['agree']} of "
-             f"{len(cells)} cells** ({result['agree_coarse']} at ε = {c}); {refined} cells lie "
-             f"in a refined span and were judged from both ε, the others keep ε = {c}'s "
-             "verdict.", "",
+             f"{len(cells)} cells** ({result['agree_coarse']} at ε = {c}): {extrapolated} "
+             f"judged by extrapolated energies, {only} by ε = {f}'s (a branch there at that ε "
+             f"only), {unreached} kept at ε = {c}'s verdict because a branch's line at "
+             f"ε = {f} did not reach them, the others at ε = {c}'s (outside the refined "
+             "spans).", "",
              "## The transitions", "",
-             f"| v | transition | ε = {c} | ε = {f} | ε → 0 | sharp | ε → 0 − sharp |",
-             "|---|---|---|---|---|---|---|"]
+             f"| v | transition | ε = {c} | ε = {f} | ε → 0 | sharp | ε → 0 − sharp | p |",
+             "|---|---|---|---|---|---|---|---|"]
     for t in ts:
         err = "—" if t["error"] is None else f"{t['error']:+.4f}"
+        p = observed_order(t)
         lines.append(f"| {t['v']:g} | {t['from']} → {t['to']} | {_f(t['coarse'])} | "
-                     f"{_f(t['fine'])} | {_f(t['limit'])} | {_f(t['sharp'])} | {err} |")
+                     f"{_f(t['fine'])} | {_f(t['limit'])} | {_f(t['sharp'])} | {err} | "
+                     f"{'—' if p is None else f'{p:.2f}'} |")
     genus0 = [abs(t["error"]) for t in ts if t["error"] is not None and not t["torus"]]
     torus = [abs(t["error"]) for t in ts if t["error"] is not None and t["torus"]]
     lines += ["", f"Extrapolated against sharp: {len(genus0)} genus-0 transitions, largest "
               f"|error| {_f(max(genus0) if genus0 else None)}; {len(torus)} with the torus, "
               f"largest {_f(max(torus) if torus else None)}. — : the two branches do not "
-              "cross where both were followed at that ε.", "",
+              "cross where both were followed at that ε. p: the order the two ε show with "
+              "the sharp crossing taken as the limit, log₂(|x_coarse − x_sharp| / |x_fine − "
+              f"x_sharp|), where both differences exceed {ORDER_FLOOR:g} (a check of the "
+              "assumed p = 2, not used in the extrapolation).", "",
               "## The cells at ε → 0", "",
               "| v \\ Δa₀ | " + " | ".join(f"{a:g}" for a in sorted({x['da0'] for x in cells}))
               + " |", "|---|" + "---|" * len({x["da0"] for x in cells})]
@@ -367,7 +399,8 @@ def write_report(out: Path, result: dict, suffix: str = "") -> None:
         row = []
         for x in sorted((x for x in cells if x["v"] == v), key=lambda x: x["da0"]):
             mark = " ⁰" if x["how"] == "extrapolated" else \
-                " ⁵" if x["how"].startswith(f"ε = {f} ") else ""
+                " ⁵" if x["how"].startswith(f"ε = {f} ") else \
+                " ᶜ" if "but not to this cell" in x["how"] else ""
             text = x["limit"] or "—"
             if x["sharp"] and x["limit"] != x["sharp"]:
                 text += f" / {x['sharp']} ✗"
@@ -376,8 +409,9 @@ def write_report(out: Path, result: dict, suffix: str = "") -> None:
     lines += ["", "A cell names the lowest branch at ε → 0 (where it differs from the sharp "
               "one's: phase field / sharp ✗); ⁰: judged by the branches' energies "
               f"extrapolated from ε = {c} and {f}; ⁵: by ε = {f}'s energies (a branch "
-              f"there at ε = {f} only); unmarked: ε = {c}'s verdict (outside every refined "
-              "span, or its lowest branch not of the span's pair).", ""]
+              f"there at ε = {f} only); ᶜ: ε = {c}'s verdict, a branch of its span followed "
+              f"at ε = {f} but not to this cell; unmarked: ε = {c}'s verdict (outside every "
+              "refined span, or its lowest branch not of the span's pair).", ""]
     if result["notes"]:
         lines += [f"Lines at ε = {f} that gave no points of their branch:", ""]
         lines += [f"- {n}" for n in result["notes"]] + [""]

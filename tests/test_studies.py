@@ -599,7 +599,7 @@ def test_package_verdicts_are_the_committed_gallerys():
 REPORTS = {"constraints_study": [], "sharp_limit": [], "gallery": [], "ade_plane": [],
            "axisymmetric": [], "nonaxisymmetric": ["--eps", "0.02"], "eps_ladder": [],
            "phase_diagram": [], "branches": [], "ade_branches": [], "azimuthal": [],
-           "ade_azimuthal": [], "branch3d": [], "starfish": []}
+           "ade_azimuthal": [], "branch3d": [], "starfish": [], "ade_limit": []}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
