@@ -10,7 +10,7 @@
   from the sharp pear's least m₀ up to the grid's end and down by ``WINDOW`` (the pear at
   Δa₀ = 1.64 budded off at ε = 0.01: does it at 0.005?).
 * **Crossings.** Each branch's points there (up to its first fold, while they are the
-  branch: ``ade_branches.kept``), e as a cubic spline in Δa₀, the crossing the root of the
+  branch: ``_lib.lines.kept``), e as a cubic spline in Δa₀, the crossing the root of the
   difference nearest the window's centre (Brent) — the same for ε = 0.01 from its lines.
 * **Extrapolation.** x₀ = x₀.₀₀₅ + (x₀.₀₀₅ − x₀.₀₁)/(2² − 1): the order is **assumed** (p = 2:
   the sharp-limit study measured 1.77–1.88 on three transitions and 2.01–2.25 on 13 energies,
@@ -48,7 +48,7 @@ import json  # noqa: E402
 from pathlib import Path  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
 
-import ade_branches as ab  # noqa: E402
+from _lib import lines as adl  # noqa: E402
 
 OUT = Path("runs") / "studies"
 EPS = 0.005
@@ -64,11 +64,11 @@ ORDER = 2
 LINE_VERSION = 2
 #: the plane's settings (``ade_branches.py``'s) and this study's
 FULL = SimpleNamespace(eps=EPS, window=WINDOW, coarse=SimpleNamespace(
-    eps=ab.EPS, v=ab.V, branches=ab.BRANCHES, step=ab.STEP, quick=False))
+    eps=adl.EPS, v=adl.V, branches=adl.BRANCHES, step=adl.STEP, quick=False))
 #: --quick: ``ade_branches.py --quick``'s line (v = 0.85 at ε = 0.04, prolate and oblate over
 #: Δa₀ 1.04 … 1.16, no transition) refined at ε = 0.02 in one span of its pair
 QUICK = SimpleNamespace(eps=0.02, window=0.06, centre=1.1, coarse=SimpleNamespace(
-    eps=ab.QUICK.eps, v=ab.QUICK.v, branches=ab.QUICK.branches, step=ab.QUICK.step,
+    eps=adl.QUICK.eps, v=adl.QUICK.v, branches=adl.QUICK.branches, step=adl.QUICK.step,
     quick=True))
 
 
@@ -102,13 +102,13 @@ def regions(coarse: dict, sharp: dict) -> list[dict]:
                         "span": (round(x - WINDOW, 3), round(x + WINDOW, 3)),
                         "x_pf": p.get("pf"), "x_sharp": p.get("sharp")})
         if pear:
-            start = round(pear[0]["m0"] + ab.PEAR_INSIDE, 3)
+            start = round(pear[0]["m0"] + adl.PEAR_INSIDE, 3)
             x_pf = [t["da0"] for t in line["pf"] if {t["from"], t["to"]} == {"prolate", "pear"}
                     and t["da0"] is not None]
             x_sh = [t["da0"] for t in line["sharp"]
                     if {t["from"], t["to"]} == {"prolate", "pear"} and t["da0"] is not None]
             out.append({"v": v, "branches": ("prolate", "pear"), "centre": start,
-                        "span": (round(start - WINDOW, 3), ab.DEFAULT_SPAN[1]),
+                        "span": (round(start - WINDOW, 3), adl.DEFAULT_SPAN[1]),
                         "x_pf": x_pf[0] if x_pf else None, "x_sharp": x_sh[0] if x_sh else None})
     return out
 
@@ -126,7 +126,7 @@ def region_keys(reg: dict, R0: float, cfg=FULL) -> list[dict]:
         for name, span in ((f"{b}@{reg['centre']:.3f}-up", (reg["centre"], reg["span"][1])),
                            (f"{b}@{reg['centre']:.3f}-down",
                             (reg["centre"], reg["span"][0]))):
-            keys.append(ab.line_key(reg["v"], b, name, span, R0, cfg.eps, cfg.coarse.step,
+            keys.append(adl.line_key(reg["v"], b, name, span, R0, cfg.eps, cfg.coarse.step,
                                     modes=0, version=LINE_VERSION))
     return keys
 
@@ -182,10 +182,10 @@ def coarse_rows(v: float, b: str, sharp_rows: dict, keys01: list[dict], archive0
     res = {"lines": []}
     for key in keys01:
         if key["v"] == v and key["branch"] == b:
-            got = archive01.get(ab.line_name(v, key["line"]))
+            got = archive01.get(adl.line_name(v, key["line"]))
             if got and got["key"] == key:
                 res["lines"].append({"rows": got["rows"]})
-    return ab.kept_lines(res, b, sharp_rows)
+    return adl.kept_lines(res, b, sharp_rows)
 
 
 def fine_rows(reg: dict, b: str, sharp_rows: dict, archive: dict, R0: float, cfg=FULL):
@@ -195,13 +195,13 @@ def fine_rows(reg: dict, b: str, sharp_rows: dict, archive: dict, R0: float, cfg
     for key in region_keys(reg, R0, cfg):
         if key["branch"] != b:
             continue
-        got = archive.get(ab.line_name(reg["v"], key["line"]))
+        got = archive.get(adl.line_name(reg["v"], key["line"]))
         if not got or got["key"] != key:
             missing.append(f"{key['line']}: not followed")
             continue
         if got["missing"]:
             missing.append(f"{key['line']}: {got['missing']}")
-        kept = ab.kept(got["rows"], b, sharp_rows)
+        kept = adl.kept(got["rows"], b, sharp_rows)
         if got["rows"] and not kept:
             first = got["rows"][0]
             missing.append(f"{key['line']}: its seed became a {first['label']}")
@@ -222,12 +222,17 @@ def main(argv=None) -> dict:
 
     cfg, suffix = (QUICK, "_quick") if args.quick else (FULL, "")
     co = cfg.coarse
-    if args.quick and not args.report_only:  # the plane's quick line first
-        ab.main(["--quick", "--out", str(args.out), "--workers", str(args.workers)])
+    if args.quick and not args.report_only:  # the plane's quick line first, by its study
+        import subprocess
+        import sys
+
+        subprocess.run([sys.executable, str(Path(__file__).with_name("ade_branches.py")),
+                        "--quick", "--out", str(args.out), "--workers", str(args.workers)],
+                       check=True, stdout=subprocess.DEVNULL)
     base01, base = args.out / f"ade_branches{suffix}", args.out / f"ade_limit{suffix}"
     coarse = json.loads((args.out / f"ade_branches{suffix}.json").read_text())
-    sharp = ab.archived_sharp(base01, co.v, co.branches)
-    R0 = ab.archived_sizes(base01, co.v)
+    sharp = adl.archived_sharp(base01, co.v, co.branches)
+    R0 = adl.archived_sizes(base01, co.v)
     # the spans are fixed at the first run: remaking ε = 0.01's report cannot rename lines
     path = base / "regions.json"
     if path.is_file():
@@ -239,15 +244,15 @@ def main(argv=None) -> dict:
     archive_path = base / "lines.json"
     archive = json.loads(archive_path.read_text()) if archive_path.is_file() else {}
     if not args.report_only:
-        ab.run_lines(base, keys, archive, args.workers)
-    spans01 = {(v, b): ab.line_spans(b, sharp[v].get(b, []), co.quick)
+        adl.run_lines(base, keys, archive, args.workers)
+    spans01 = {(v, b): adl.line_spans(b, sharp[v].get(b, []), co.quick)
                for v in co.v for b in co.branches}
-    keys01 = [ab.line_key(v, b, name, span, R0[v], co.eps, co.step)
+    keys01 = [adl.line_key(v, b, name, span, R0[v], co.eps, co.step)
               for (v, b), lines in spans01.items() for name, span in lines]
     archive01 = json.loads((base01 / "lines.json").read_text())
     result = judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg)
     result["seconds"] = {
-        "fine": round(sum(archive.get(ab.line_name(k["v"], k["line"]), {})
+        "fine": round(sum(archive.get(adl.line_name(k["v"], k["line"]), {})
                           .get("seconds") or 0.0 for k in keys), 1),
         "coarse": coarse.get("line_seconds")}
     write_json_atomic(args.out / f"ade_limit{suffix}.json", result)
@@ -306,22 +311,7 @@ def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dic
                 e[br] = {"coarse": at(c01(v, br), x),
                          "fine": fine[0] if fine else None}
                 e[br]["limit"] = extrapolate(e[br]["fine"], e[br]["coarse"])
-            cell["e"] = e
-            both = {br: d["limit"] for br, d in e.items() if d["limit"] is not None}
-            only = {br: d["fine"] for br, d in e.items()
-                    if d["limit"] is None and d["fine"] is not None}
-            fine_all = {br: d["fine"] for br, d in e.items() if d["fine"] is not None}
-            if unreached:  # followed at the finer ε, but not to this cell: not judged
-                cell["how"] = (f"{coarse_eps} ({', '.join(unreached)} followed at {fine_eps} "
-                               "but not to this cell)")
-            elif only and min(fine_all, key=fine_all.get) in only:
-                cell["limit"] = min(fine_all, key=fine_all.get)
-                cell["how"] = f"{fine_eps} (its branch does not exist there at {coarse_eps})"
-            elif both:
-                cell["limit"] = min(both, key=both.get)
-                cell["how"] = "extrapolated"
-            else:
-                cell["how"] = f"{coarse_eps} (no branch at both ε here)"
+            cell.update(e=e, **verdict(e, unreached, fine_eps, coarse_eps))
         elif inside:
             cell["how"] = f"{coarse_eps} (its lowest is not of the refined pair)"
         cells.append(cell)
@@ -331,6 +321,24 @@ def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dic
             "window": cfg.window, "regions": regs,
             "transitions": transitions, "cells": cells, "agree": agree, "agree_coarse": agree01,
             "notes": notes}
+
+
+def verdict(e: dict, unreached: list, fine_eps: str, coarse_eps: str) -> dict:
+    """A refined cell's lowest branch at ε → 0 and how it was judged (module docstring);
+    ``e`` each branch's energies there, ``unreached`` the branches followed at the finer ε
+    but not to the cell. (An empty dict: the coarse ε's verdict stands, as it was.)"""
+    both = {br: d["limit"] for br, d in e.items() if d["limit"] is not None}
+    only = {br: d["fine"] for br, d in e.items() if d["limit"] is None and d["fine"] is not None}
+    fine_all = {br: d["fine"] for br, d in e.items() if d["fine"] is not None}
+    if unreached:  # followed at the finer ε, but not to this cell: not judged
+        return {"how": f"{coarse_eps} ({', '.join(unreached)} followed at {fine_eps} but not "
+                       "to this cell)"}
+    if only and min(fine_all, key=fine_all.get) in only:
+        return {"limit": min(fine_all, key=fine_all.get),
+                "how": f"{fine_eps} (its branch does not exist there at {coarse_eps})"}
+    if both:
+        return {"limit": min(both, key=both.get), "how": "extrapolated"}
+    return {"how": f"{coarse_eps} (no branch at both ε here)"}
 
 
 #: the least |x − x_sharp| from which :func:`observed_order` is computed (the sharp crossings
@@ -350,6 +358,26 @@ def observed_order(t: dict) -> float | None:
 
 def _f(x, digits=4):
     return "—" if x is None else f"{x:.{digits}f}"
+
+
+def cell_grid(cells: list[dict], f: str) -> list[str]:
+    """The cells' table: each cell's branch at ε → 0 and how it was judged (``f`` the finer
+    ε, as printed)."""
+    da0 = sorted({x["da0"] for x in cells})
+    out = ["| v \\ Δa₀ | " + " | ".join(f"{a:g}" for a in da0) + " |",
+           "|---|" + "---|" * len(da0)]
+    for v in sorted({x["v"] for x in cells}, reverse=True):
+        row = []
+        for x in sorted((x for x in cells if x["v"] == v), key=lambda x: x["da0"]):
+            mark = " ⁰" if x["how"] == "extrapolated" else \
+                " ⁵" if x["how"].startswith(f"ε = {f} ") else \
+                " ᶜ" if "but not to this cell" in x["how"] else ""
+            text = x["limit"] or "—"
+            if x["sharp"] and x["limit"] != x["sharp"]:
+                text += f" / {x['sharp']} ✗"
+            row.append(text + mark)
+        out.append(f"| {v:g} | " + " | ".join(row) + " |")
+    return out
 
 
 def write_report(out: Path, result: dict, suffix: str = "") -> None:
@@ -392,20 +420,7 @@ def write_report(out: Path, result: dict, suffix: str = "") -> None:
               "the sharp crossing taken as the limit, log₂(|x_coarse − x_sharp| / |x_fine − "
               f"x_sharp|), where both differences exceed {ORDER_FLOOR:g} (a check of the "
               "assumed p = 2, not used in the extrapolation).", "",
-              "## The cells at ε → 0", "",
-              "| v \\ Δa₀ | " + " | ".join(f"{a:g}" for a in sorted({x['da0'] for x in cells}))
-              + " |", "|---|" + "---|" * len({x["da0"] for x in cells})]
-    for v in sorted({x["v"] for x in cells}, reverse=True):
-        row = []
-        for x in sorted((x for x in cells if x["v"] == v), key=lambda x: x["da0"]):
-            mark = " ⁰" if x["how"] == "extrapolated" else \
-                " ⁵" if x["how"].startswith(f"ε = {f} ") else \
-                " ᶜ" if "but not to this cell" in x["how"] else ""
-            text = x["limit"] or "—"
-            if x["sharp"] and x["limit"] != x["sharp"]:
-                text += f" / {x['sharp']} ✗"
-            row.append(text + mark)
-        lines.append(f"| {v:g} | " + " | ".join(row) + " |")
+              "## The cells at ε → 0", "", *cell_grid(cells, f)]
     lines += ["", "A cell names the lowest branch at ε → 0 (where it differs from the sharp "
               "one's: phase field / sharp ✗); ⁰: judged by the branches' energies "
               f"extrapolated from ε = {c} and {f}; ⁵: by ε = {f}'s energies (a branch "

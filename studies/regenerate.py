@@ -39,6 +39,7 @@ STEPS = (
     ("ade_plane", ["studies/ade_plane.py", "--out", RESULTS]),
     ("branches", ["studies/branches.py", "--out", RESULTS]),
     ("ade_branches", ["studies/ade_branches.py", "--out", RESULTS]),
+    ("ade_limit", ["studies/ade_limit.py", "--out", RESULTS]),
     ("azimuthal", ["studies/azimuthal.py", "--out", RESULTS]),
     ("ade_azimuthal", ["studies/ade_azimuthal.py", "--out", RESULTS]),
     ("solver_bench", ["studies/solver_bench.py", "--out", RESULTS]),
@@ -66,7 +67,9 @@ SWEEPS = {"gallery": ("built from its plan: studies/gallery.py point_spec, kick_
           "nonaxisymmetric": ("built from its cases: studies/nonaxisymmetric.py point_spec",),
           "phase_diagram": ("studies/sweeps/minimal.toml", "studies/sweeps/ade.toml"),
           "branches": ("studies/sweeps/branches.toml",),
-          "ade_branches": ("built from its lines: studies/ade_branches.py line_point",),
+          "ade_branches": ("built from its lines: studies/_lib/lines.py line_point",),
+          "ade_limit": ("built from its spans: studies/ade_limit.py region_keys, "
+                        "studies/_lib/lines.py line_point",),
           "azimuthal": ("built from its branches: studies/azimuthal.py plan",),
           "constraints_study": ("built from its Δt trials: studies/constraints_study.py "
                                 "case_point",)}
