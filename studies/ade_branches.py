@@ -60,11 +60,12 @@ from _lib.lines import (  # noqa: E402
     V,
     archived_sharp,
     archived_sizes,
+    at,
+    curve,
     kept,
     kept_lines,
-    line_key,
     line_name,
-    line_spans,
+    plane_lines,
     run_lines,
 )
 from _lib.sharp import sharp_line  # noqa: E402
@@ -114,18 +115,9 @@ def line_sizes(base: Path, v_list, eps: float, branches) -> dict:
 
 
 def energy_at(rows: list[dict], x: float, key="da0", value="e") -> float | None:
-    """e at ``x`` along one branch (cubic through the points where there are four, else
-    linear), None outside the points."""
-    import numpy as np
-    from scipy.interpolate import CubicSpline
-
-    pts = sorted({r[key]: r[value] for r in rows}.items())
-    if len(pts) < 2 or not pts[0][0] - 1e-9 <= x <= pts[-1][0] + 1e-9:
-        return None
-    xs, ys = map(np.array, zip(*pts, strict=True))
-    if len(pts) >= 4:
-        return float(CubicSpline(xs, ys)(x))
-    return float(np.interp(x, xs, ys))
+    """e at ``x`` along one branch (:func:`_lib.lines.curve`: cubic through the points where
+    there are four, else linear), None outside the points."""
+    return at(curve(rows, key, value), x)
 
 
 def lowest(values: dict) -> str | None:
@@ -223,9 +215,7 @@ def main(argv=None) -> dict:
     else:
         sharp = sharp_lines(base, v_list, branches, grid, args.workers)
         R0 = line_sizes(base, v_list, eps, branches)
-    spans = {(v, b): line_spans(b, sharp[v].get(b, []), q) for v in v_list for b in branches}
-    keys = [line_key(v, b, name, span, R0[v], eps, step)
-            for (v, b), lines in spans.items() for name, span in lines]
+    spans, keys = plane_lines(sharp, R0, v_list, branches, eps, step, q)
     path = base / "lines.json"
     archive = json.loads(path.read_text()) if path.is_file() else {}
     if not args.report_only:

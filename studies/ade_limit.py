@@ -92,10 +92,10 @@ def regions(coarse: dict, sharp: dict) -> list[dict]:
         pairs = {}
         for side in ("pf", "sharp"):
             for t in line[side]:
-                key = frozenset((t["from"], t["to"]))
-                if t["da0"] is None or (pear and key == {"prolate", "pear"}):
-                    continue
-                pairs.setdefault(key, {"from": t["from"], "to": t["to"]})[side] = t["da0"]
+                if t["da0"] is not None:
+                    pairs.setdefault(frozenset((t["from"], t["to"])),
+                                     {"from": t["from"], "to": t["to"]})[side] = t["da0"]
+        with_pear = pairs.pop(frozenset(("prolate", "pear")), {}) if pear else {}
         for p in pairs.values():
             x = predicted(p.get("pf"), p.get("sharp"))
             out.append({"v": v, "branches": (p["from"], p["to"]), "centre": round(x, 3),
@@ -103,13 +103,9 @@ def regions(coarse: dict, sharp: dict) -> list[dict]:
                         "x_pf": p.get("pf"), "x_sharp": p.get("sharp")})
         if pear:
             start = round(pear[0]["m0"] + adl.PEAR_INSIDE, 3)
-            x_pf = [t["da0"] for t in line["pf"] if {t["from"], t["to"]} == {"prolate", "pear"}
-                    and t["da0"] is not None]
-            x_sh = [t["da0"] for t in line["sharp"]
-                    if {t["from"], t["to"]} == {"prolate", "pear"} and t["da0"] is not None]
             out.append({"v": v, "branches": ("prolate", "pear"), "centre": start,
                         "span": (round(start - WINDOW, 3), adl.DEFAULT_SPAN[1]),
-                        "x_pf": x_pf[0] if x_pf else None, "x_sharp": x_sh[0] if x_sh else None})
+                        "x_pf": with_pear.get("pf"), "x_sharp": with_pear.get("sharp")})
     return out
 
 
@@ -134,20 +130,6 @@ def region_keys(reg: dict, R0: float, cfg=FULL) -> list[dict]:
 # ---------------------------------------------------------------------------------------------
 # crossings and energies
 # ---------------------------------------------------------------------------------------------
-def curve(rows: list[dict]):
-    """e(Δa₀) along one branch's points: a cubic spline (linear through two or three
-    points), with its range; None for fewer than two points."""
-    import numpy as np
-    from scipy.interpolate import CubicSpline, interp1d
-
-    pts = sorted({round(r["da0"], 12): r["e"] for r in rows}.items())
-    if len(pts) < 2:
-        return None
-    xs, ys = map(np.array, zip(*pts, strict=True))
-    f = CubicSpline(xs, ys) if len(pts) >= 4 else interp1d(xs, ys)
-    return f, float(xs[0]), float(xs[-1])
-
-
 def cross(a, b, centre: float) -> float | None:
     """The root of e_a − e_b nearest ``centre`` where both curves are defined (Brent on each
     sign change of a fine sampling), None where they do not cross."""
@@ -164,10 +146,6 @@ def cross(a, b, centre: float) -> float | None:
     roots = [float(brentq(lambda x: float(a[0](x) - b[0](x)), xs[i], xs[i + 1]))
              for i in range(len(xs) - 1) if d[i] == 0.0 or d[i] * d[i + 1] < 0]
     return min(roots, key=lambda x: abs(x - centre)) if roots else None
-
-
-def at(c, x: float) -> float | None:
-    return None if c is None or not c[1] - 1e-9 <= x <= c[2] + 1e-9 else float(c[0](x))
 
 
 def extrapolate(fine: float | None, coarse: float | None) -> float | None:
@@ -245,10 +223,7 @@ def main(argv=None) -> dict:
     archive = json.loads(archive_path.read_text()) if archive_path.is_file() else {}
     if not args.report_only:
         adl.run_lines(base, keys, archive, args.workers)
-    spans01 = {(v, b): adl.line_spans(b, sharp[v].get(b, []), co.quick)
-               for v in co.v for b in co.branches}
-    keys01 = [adl.line_key(v, b, name, span, R0[v], co.eps, co.step)
-              for (v, b), lines in spans01.items() for name, span in lines]
+    _, keys01 = adl.plane_lines(sharp, R0, co.v, co.branches, co.eps, co.step, co.quick)
     archive01 = json.loads((base01 / "lines.json").read_text())
     result = judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg)
     result["seconds"] = {
@@ -273,7 +248,7 @@ def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dic
 
     def c01(v, b):
         if (v, b, "coarse") not in curves:
-            curves[(v, b, "coarse")] = curve(coarse_rows(v, b, sharp_rows(v), keys01,
+            curves[(v, b, "coarse")] = adl.curve(coarse_rows(v, b, sharp_rows(v), keys01,
                                                          archive01))
         return curves[(v, b, "coarse")]
 
@@ -283,7 +258,7 @@ def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dic
         fine = {}
         for br in (a, b):
             rows, missing = fine_rows(reg, br, sharp_rows(v), archive, R0[v], cfg)
-            curves[(v, br, i)] = fine[br] = curve(rows)
+            curves[(v, br, i)] = fine[br] = adl.curve(rows)
             notes += [f"v = {v:g}, {m}" for m in missing]
         x01 = cross(c01(v, a), c01(v, b), reg["centre"])
         x005 = cross(fine[a], fine[b], reg["centre"])
@@ -305,10 +280,10 @@ def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dic
             e, unreached = {}, []
             for br in branches:
                 have = [curves[(v, br, i)] for i in inside if br in regs[i]["branches"]]
-                fine = [f for f in (at(c, x) for c in have) if f is not None]
+                fine = [f for f in (adl.at(c, x) for c in have) if f is not None]
                 if not fine and any(c is not None for c in have):
                     unreached.append(br)
-                e[br] = {"coarse": at(c01(v, br), x),
+                e[br] = {"coarse": adl.at(c01(v, br), x),
                          "fine": fine[0] if fine else None}
                 e[br]["limit"] = extrapolate(e[br]["fine"], e[br]["coarse"])
             cell.update(e=e, **verdict(e, unreached, fine_eps, coarse_eps))

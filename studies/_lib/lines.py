@@ -247,3 +247,33 @@ def archived_sizes(base: Path, v_list) -> dict:
     if missing:
         raise ModelError(f"{path} has no R0 for v = {missing}: run the study first")
     return known
+
+
+def plane_lines(sharp: dict, R0: dict, v_list, branches, eps: float, step: float,
+                quick: bool) -> tuple[dict, list[dict]]:
+    """The plane's lines: {(v, branch): [(name, span), …]} (:func:`line_spans`) and their
+    keys (:func:`line_key`), in that order."""
+    spans = {(v, b): line_spans(b, sharp[v].get(b, []), quick) for v in v_list for b in branches}
+    keys = [line_key(v, b, name, span, R0[v], eps, step)
+            for (v, b), lines in spans.items() for name, span in lines]
+    return spans, keys
+
+
+def curve(rows: list[dict], key: str = "da0", value: str = "e"):
+    """``value`` along one branch as a function of ``key``: a cubic spline through its points
+    where there are four, else linear; (the function, its range), None for fewer than two
+    points."""
+    import numpy as np
+    from scipy.interpolate import CubicSpline
+
+    pts = sorted({r[key]: r[value] for r in rows}.items())
+    if len(pts) < 2:
+        return None
+    xs, ys = map(np.array, zip(*pts, strict=True))
+    f = CubicSpline(xs, ys) if len(pts) >= 4 else (lambda x: np.interp(x, xs, ys))
+    return f, float(xs[0]), float(xs[-1])
+
+
+def at(c, x: float) -> float | None:
+    """A :func:`curve` at ``x``, None outside its points (or for no curve)."""
+    return None if c is None or not c[1] - 1e-9 <= x <= c[2] + 1e-9 else float(c[0](x))
