@@ -8,7 +8,8 @@
   from the crossing predicted at ε = 0.005 — x₀.₀₁ + ¾ (x_sharp − x₀.₀₁), the p = 2 guess — to
   ``WINDOW`` either side. Where the sharp membrane has a pear, the pear and the prolate
   from the sharp pear's least m₀ up to the grid's end and down by ``WINDOW`` (the pear at
-  Δa₀ = 1.64 budded off at ε = 0.01: does it at 0.005?).
+  Δa₀ = 1.64 budded off at ε = 0.01: does it at 0.005?); and the pear from each grid cell of
+  that span, seeded there (``CELL_SPAN``: its span's lines stop within 0.004 of their start).
 * **Crossings.** Each branch's points there (up to its first fold, while they are the
   branch: ``_lib.lines.kept``), e as a cubic spline in Δa₀, the crossing the root of the
   difference nearest the window's centre (Brent) — the same for ε = 0.01 from its lines.
@@ -19,10 +20,10 @@
   extrapolated the same way, e₀ = e₀.₀₀₅ + (e₀.₀₀₅ − e₀.₀₁)/3, the lowest of those that exist at
   both ε; a branch that exists there at ε = 0.005 only (the pear at 1.64) competes with its
   ε = 0.005 energy against the others' at ε = 0.005, and the cell says so; a branch whose
-  seed became another shape there at ε = 0.005 (no point of it) is absent. A cell that a
-  branch's ε = 0.005 line did not reach (it ended before: Newton did not converge) keeps its
-  ε = 0.01 verdict and says why, as does a cell outside every span (≥ ``WINDOW`` from every
-  predicted crossing).
+  seed became another shape there at ε = 0.005 (no point of it; for the pear, its seed at the
+  cell itself) is absent. A cell that a branch's ε = 0.005 line did not reach (it ended
+  before: Newton did not converge) keeps its ε = 0.01 verdict and says why, as does a cell
+  outside every span (≥ ``WINDOW`` from every predicted crossing).
 
 The lines are one branch sweep, as ``ade_branches.py``'s: ``OUT/ade_limit/sweep`` (resumable;
 each line archived in ``OUT/ade_limit/lines.json`` once the sweep ends). Needs
@@ -62,6 +63,12 @@ ORDER = 2
 #: test (``ade_branches.py``'s lines at ε = 0.01 were followed with version 1, e4098a1; their
 #: converged points are steady states either way, the same to Newton's tolerance)
 LINE_VERSION = 2
+#: the pear's own line from each grid cell of its span, ``CELL_SPAN`` down in one step: its
+#: span's lines end within 0.004 of their start at ε = 0.005 (corrections of 12–14 Newton
+#: iterations), so the cells are reached by starting there (a cell's seed is the sharp pear
+#: at its Δa₀); only the first point is used, the rest (steps of ~8e-4, ~30 s each: measured
+#: at v = 0.75) says that it continues
+CELL_SPAN = CELL_STEP = 0.003
 #: the plane's settings (``ade_branches.py``'s) and this study's
 FULL = SimpleNamespace(eps=EPS, window=WINDOW, coarse=SimpleNamespace(
     eps=adl.EPS, v=adl.V, branches=adl.BRANCHES, step=adl.STEP, quick=False))
@@ -125,6 +132,41 @@ def region_keys(reg: dict, R0: float, cfg=FULL) -> list[dict]:
             keys.append(adl.line_key(reg["v"], b, name, span, R0, cfg.eps, cfg.coarse.step,
                                     modes=0, version=LINE_VERSION))
     return keys
+
+
+def cell_keys(reg: dict, R0: float, grid, cfg=FULL) -> dict:
+    """{Δa₀: key} of the pear's lines from the grid's cells in a pear span (:data:`CELL_SPAN`;
+    none in other spans)."""
+    if "pear" not in reg["branches"]:
+        return {}
+    lo, hi = sorted(reg["span"])
+    return {x: adl.line_key(reg["v"], "pear", f"pear@{x:.3f}-cell", (x, round(x - CELL_SPAN, 3)),
+                            R0, cfg.eps, CELL_STEP, modes=0, version=LINE_VERSION)
+            for x in grid if lo - 1e-9 <= x <= hi + 1e-9}
+
+
+def grid_of(coarse: dict, v: float) -> list[float]:
+    """The plane's Δa₀ at ``v`` (its cells)."""
+    return sorted({p["da0"] for p in coarse["points"] if p["v"] == v})
+
+
+def seeded_pear(x: float, regs: list[dict], R0: float, sharp_rows: dict, archive: dict,
+                cfg=FULL) -> tuple[float | None, str | None]:
+    """The pear's e at the cell ``x`` from its own line (:func:`cell_keys`: its first point,
+    where that is the pear; None where the cell has no such line or it was not followed),
+    and why a line there gave none (its seed became another shape: the pear is absent)."""
+    keys = [k for k in (cell_keys(r, R0, [x], cfg).get(x) for r in regs) if k]
+    got = archive.get(adl.line_name(keys[0]["v"], keys[0]["line"])) if keys else None
+    if not got or got["key"] != keys[0]:
+        return None, None
+    if got["missing"]:
+        return None, got["missing"]
+    if not got["rows"]:
+        return None, "no point"
+    first = got["rows"][0]
+    if not adl.kept(got["rows"][:1], "pear", sharp_rows):
+        return None, f"its seed there became a {first['label']}"
+    return first["e"], None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -219,6 +261,8 @@ def main(argv=None) -> dict:
         regs = quick_regions() if args.quick else regions(coarse, sharp)
         write_json_atomic(path, regs, make_folder=True)
     keys = [k for reg in regs for k in region_keys(reg, R0[reg["v"]], cfg)]
+    keys += [k for reg in regs
+             for k in cell_keys(reg, R0[reg["v"]], grid_of(coarse, reg["v"]), cfg).values()]
     archive_path = base / "lines.json"
     archive = json.loads(archive_path.read_text()) if archive_path.is_file() else {}
     if not args.report_only:
@@ -281,7 +325,13 @@ def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dic
             for br in branches:
                 have = [curves[(v, br, i)] for i in inside if br in regs[i]["branches"]]
                 fine = [f for f in (adl.at(c, x) for c in have) if f is not None]
-                if not fine and any(c is not None for c in have):
+                why = None
+                if not fine and br == "pear":  # from the pear's line at this cell
+                    got, why = seeded_pear(x, [regs[i] for i in inside], R0[v],
+                                           sharp_rows(v), archive, cfg)
+                    fine += [got] if got is not None else []
+                    notes += [f"v = {v:g}, pear@{x:.3f}-cell: {why}"] if why else []
+                if not fine and why is None and any(c is not None for c in have):
                     unreached.append(br)
                 e[br] = {"coarse": adl.at(c01(v, br), x),
                          "fine": fine[0] if fine else None}

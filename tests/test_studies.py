@@ -710,6 +710,46 @@ def test_ade_plane_runs_each_seed_as_a_point_of_one_sweep(tmp_path, monkeypatch)
     assert json.loads((tmp_path / "ade" / "runs.json").read_text()) == runs
 
 
+def test_ade_limit_takes_the_pear_at_a_cell_from_its_own_line():
+    """ade_limit: where the pear's span lines stop short of a cell (at ε = 0.005 they end
+    within 0.004 of their start), the pear's e there is the first point of its line seeded at
+    the cell; a seed that became another shape makes the pear absent there (a note says
+    so), and a cell line not followed leaves the cell unreached (ε = 0.01's verdict)."""
+    lim = _load(STUDIES / "ade_limit.py")
+    v, R0 = 0.8, 0.229
+    reg = {"v": v, "branches": ["prolate", "pear"], "centre": 1.54, "span": [1.49, 1.64],
+           "x_pf": None, "x_sharp": None}
+    coarse = {"lines": [], "points": [{"v": v, "da0": 1.64, "pf": "prolate", "sharp": "pear"}]}
+    sharp = {v: {"prolate": [], "pear": []}}
+
+    def line(key, rows):
+        rows = [{"da0": x, "e": e, "label": label, "fold": None} for x, e, label in rows]
+        return {"key": key, "rows": rows, "missing": None, "seconds": 1.0}
+
+    def judged(cell_label):
+        archive = {}
+        for key in lim.region_keys(reg, R0):
+            lab = key["branch"]
+            xs = (1.54, 1.56, 1.6, 1.64) if lab == "prolate" else (1.54, 1.5435)
+            archive[lim.adl.line_name(v, key["line"])] = line(key, [(x, x, lab) for x in xs])
+        assert sorted(lim.cell_keys(reg, R0, [1.4, 1.52, 1.64])) == [1.52, 1.64]
+        if cell_label:
+            key = lim.cell_keys(reg, R0, [1.64])[1.64]
+            archive[lim.adl.line_name(v, key["line"])] = line(key, [(1.64, 1.0, cell_label)])
+        res = lim.judged(coarse, sharp, [reg], {v: R0}, archive, [], {})
+        return res["cells"][0], res["notes"]
+
+    cell, notes = judged("pear")
+    assert cell["limit"] == "pear" and cell["e"]["pear"]["fine"] == 1.0, cell
+    assert cell["how"].startswith("ε = 0.005 ") and not notes, (cell, notes)
+    cell, notes = judged("2 vesicles")
+    assert cell["limit"] == "prolate" and cell["e"]["pear"]["fine"] is None, cell
+    assert "but not to this cell" not in cell["how"], cell  # absent, not unreached
+    assert notes == ["v = 0.8, pear@1.640-cell: its seed there became a 2 vesicles"], notes
+    cell, _ = judged(None)
+    assert cell["limit"] == "prolate" and "but not to this cell" in cell["how"], cell
+
+
 def test_seeded_runs_are_points_of_one_sweep(tmp_path):
     """_lib.seeded.make_runs: two seeded steady states (the quick prolate at ε = 0.08 on the
     axisymmetric FEM, a second ε) as one sweep, each run in its own point folder, and the
