@@ -32,7 +32,7 @@ each line archived in ``OUT/ade_limit/lines.json`` once the sweep ends). Needs
 Writes ``OUT/ade_limit.md`` (with the hand-written ``OUT/ade_limit_notes.md``) and
 ``OUT/ade_limit.json``.
 
-    python studies/ade_limit.py --out studies/results        # ~40 min on 2 cores
+    python studies/ade_limit.py --out studies/results        # ~1 h on 2 cores (62 lines)
     python studies/ade_limit.py --out studies/results --report-only
     python studies/ade_limit.py --quick      # the code: ade_branches.py --quick, refined at 0.02
 
@@ -167,6 +167,16 @@ def seeded_pear(x: float, regs: list[dict], R0: float, sharp_rows: dict, archive
     if not adl.kept(got["rows"][:1], "pear", sharp_rows):
         return None, f"its seed there became a {first['label']}"
     return first["e"], None
+
+
+def fine_energy(br: str, x: float, have: list, regs: list[dict], R0: float, sharp_rows: dict,
+                archive: dict, cfg=FULL) -> tuple[float | None, str | None]:
+    """A branch's e at the cell ``x`` at the finer ε: on its span's curves ``have``, else (the
+    pear) from its line seeded there (:func:`seeded_pear`, with why it gave none)."""
+    fine = [f for f in (adl.at(c, x) for c in have) if f is not None]
+    if fine or br != "pear":
+        return (fine[0] if fine else None), None
+    return seeded_pear(x, regs, R0, sharp_rows, archive, cfg)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -324,17 +334,12 @@ def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dic
             e, unreached = {}, []
             for br in branches:
                 have = [curves[(v, br, i)] for i in inside if br in regs[i]["branches"]]
-                fine = [f for f in (adl.at(c, x) for c in have) if f is not None]
-                why = None
-                if not fine and br == "pear":  # from the pear's line at this cell
-                    got, why = seeded_pear(x, [regs[i] for i in inside], R0[v],
-                                           sharp_rows(v), archive, cfg)
-                    fine += [got] if got is not None else []
-                    notes += [f"v = {v:g}, pear@{x:.3f}-cell: {why}"] if why else []
-                if not fine and why is None and any(c is not None for c in have):
+                fine, why = fine_energy(br, x, have, [regs[i] for i in inside], R0[v],
+                                        sharp_rows(v), archive, cfg)
+                notes += [f"v = {v:g}, pear@{x:.3f}-cell: {why}"] if why else []
+                if fine is None and why is None and any(c is not None for c in have):
                     unreached.append(br)
-                e[br] = {"coarse": adl.at(c01(v, br), x),
-                         "fine": fine[0] if fine else None}
+                e[br] = {"coarse": adl.at(c01(v, br), x), "fine": fine}
                 e[br]["limit"] = extrapolate(e[br]["fine"], e[br]["coarse"])
             cell.update(e=e, **verdict(e, unreached, fine_eps, coarse_eps))
         elif inside:
