@@ -58,13 +58,13 @@ from _lib.lines import (  # noqa: E402
     QUICK,
     STEP,
     V,
+    archived,
     archived_sharp,
     archived_sizes,
     at,
     curve,
     kept,
     kept_lines,
-    line_name,
     plane_lines,
     run_lines,
 )
@@ -263,8 +263,8 @@ def gathered(spans: dict, keys: list[dict], archive: dict, R0: dict) -> dict:
                                       "no sharp pear on this line to start from"})
     for key in keys:
         v, b, name = key["v"], key["branch"], key["line"]
-        res = archive.get(line_name(v, name))
-        if res is None or res["key"] != key:
+        res = archived(archive, key)
+        if res is None:
             res = {"rows": [], "missing": "not followed (no archived line with its "
                                           "settings)", "seconds": None}
         pf[v][b]["lines"].append({"name": name, "rows": res["rows"],

@@ -156,8 +156,8 @@ def seeded_pear(x: float, regs: list[dict], R0: float, sharp_rows: dict, archive
     where that is the pear; None where the cell has no such line or it was not followed),
     and why a line there gave none (its seed became another shape: the pear is absent)."""
     keys = [k for k in (cell_keys(r, R0, [x], cfg).get(x) for r in regs) if k]
-    got = archive.get(adl.line_name(keys[0]["v"], keys[0]["line"])) if keys else None
-    if not got or got["key"] != keys[0]:
+    got = adl.archived(archive, keys[0]) if keys else None
+    if not got:
         return None, None
     if got["missing"]:
         return None, got["missing"]
@@ -212,8 +212,8 @@ def coarse_rows(v: float, b: str, sharp_rows: dict, keys01: list[dict], archive0
     res = {"lines": []}
     for key in keys01:
         if key["v"] == v and key["branch"] == b:
-            got = archive01.get(adl.line_name(v, key["line"]))
-            if got and got["key"] == key:
+            got = adl.archived(archive01, key)
+            if got:
                 res["lines"].append({"rows": got["rows"]})
     return adl.kept_lines(res, b, sharp_rows)
 
@@ -225,8 +225,8 @@ def fine_rows(reg: dict, b: str, sharp_rows: dict, archive: dict, R0: float, cfg
     for key in region_keys(reg, R0, cfg):
         if key["branch"] != b:
             continue
-        got = archive.get(adl.line_name(reg["v"], key["line"]))
-        if not got or got["key"] != key:
+        got = adl.archived(archive, key)
+        if not got:
             missing.append(f"{key['line']}: not followed")
             continue
         if got["missing"]:

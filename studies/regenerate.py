@@ -68,7 +68,7 @@ SWEEPS = {"gallery": ("built from its plan: studies/gallery.py point_spec, kick_
           "phase_diagram": ("studies/sweeps/minimal.toml", "studies/sweeps/ade.toml"),
           "branches": ("studies/sweeps/branches.toml",),
           "ade_branches": ("built from its lines: studies/_lib/lines.py line_point",),
-          "ade_limit": ("built from its spans: studies/ade_limit.py region_keys, "
+          "ade_limit": ("built from its spans: studies/ade_limit.py region_keys and cell_keys, "
                         "studies/_lib/lines.py line_point",),
           "azimuthal": ("built from its branches: studies/azimuthal.py plan",),
           "constraints_study": ("built from its Δt trials: studies/constraints_study.py "

@@ -113,6 +113,13 @@ def line_point(key: dict) -> dict:
     return spec
 
 
+def archived(archive: dict, key: dict) -> dict | None:
+    """A line's entry in ``archive`` where it was archived with ``key`` (None: not followed
+    with these settings)."""
+    got = archive.get(line_name(key["v"], key["line"]))
+    return got if got is not None and got["key"] == key else None
+
+
 def run_lines(base: Path, keys: list[dict], archive: dict, workers: int) -> None:
     """Follow the lines not in ``archive`` (or archived with another key) as one branch
     sweep in ``base/sweep`` (:mod:`fem_ade.campaigns.sweep`: a Dask task per line, resumable, a
@@ -126,7 +133,7 @@ def run_lines(base: Path, keys: list[dict], archive: dict, workers: int) -> None
     specs, todo = [], []
     for key in keys:
         name = line_name(key["v"], key["line"])
-        if archive.get(name, {}).get("key") == key:
+        if archived(archive, key):
             continue
         try:
             specs.append(line_point(key))
