@@ -28,7 +28,8 @@ resumable, as a sweep is: a finished branch is read back, a stopped one goes on.
 
 Its time is the ε = 0.005 prolate's (42 points from v = 0.70 to 0.645): a point there took
 ~2.5 min, 119 s of it the stability, before the direct solver (measured 2026-12-03); with it
-~12.5 s with the m = 0 stability (`studies/results/solver_bench.json`), so ~10 min.
+~12.5 s with the m = 0 stability by SuperLU, 8.7 s by PARDISO
+(`studies/results/solver_bench.json`), so 6–10 min.
 
 One thread: ``OPENBLAS_NUM_THREADS=1``, ``FEM_ADE_FFT_WORKERS=1`` unless set.
 """

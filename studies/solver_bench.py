@@ -2,12 +2,14 @@
 
 At ε = 0.005 (the prolate at R₀ = 0.17 from v = 0.69, order 8, 2.5 nodes per ε: 66265
 nodes) and, with ``--small``, at ε = 0.0025: one continuation point (the same predictor
-from the same three points) corrected by Newton with the direct solve (the sparse LU of the
+from the same three points) corrected by Newton with the direct solve (the factored
 Hessian in mixed form, docs/model.md §13) and with MINRES preconditioned by the bulk Hessian
-(the path before), and the point's stability — the m = 0 block by shift-invert on the LU and
-by ARPACK's regular mode (the path before), and the blocks m = 0 … 8. Prints each time, the
-ratios, and the targets of the issue (a point with its m = 0 stability in ≤ 10 s, with
-m ≤ 8 in ≤ 20 s, at ε = 0.0025 in ≤ 60 s), one thread, and writes
+(the path before), and the point's stability — the m = 0 block by shift-invert on the
+factorization and by ARPACK's regular mode (the path before), and the blocks m = 0 … 8.
+The direct path is measured with each sparse code installed (MKL's PARDISO, scipy's
+SuperLU: ``FEM_ADE_SPARSE``), the default one first. Prints each time, the ratios, and the
+targets of the issue (a point with its m = 0 stability in ≤ 10 s, with m ≤ 8 in ≤ 20 s, at
+ε = 0.0025 in ≤ 60 s) by the default code, one thread, and writes
 ``OUT/solver_bench.json``. The branches it starts from are made once in
 ``OUT/solver_bench/`` (kept: a second run measures only).
 
@@ -20,13 +22,46 @@ from _lib.cli import one_thread, study_parser
 
 one_thread()
 
+import os  # noqa: E402
 import time  # noqa: E402
+from contextlib import contextmanager  # noqa: E402
 from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
 
 OUT = Path("runs") / "studies"
 #: (ε, R₀, from, to): the branches the points are taken from
 CASES = {0.005: (0.17, 0.69, 0.685), 0.0025: (0.17, 0.69, 0.688), 0.04: (0.2, 0.85, 0.84)}
 TARGETS = {"point_m0_s": 10.0, "point_m8_s": 20.0, "point_small_s": 60.0}
+#: a sparse code's figures kept beside the other's
+CODE_KEYS = ("newton_direct_s", "newton_direct_iterations", "E_direct", "stability_m0_s",
+             "stability_m8_s", "eigenvalues_m0", "point_m0_s", "point_m8_s")
+
+
+def sparse_codes() -> list[str]:
+    """The sparse codes installed, the default first (fem_ade.backends.fem.direct)."""
+    from fem_ade.backends.fem import pardiso
+    from fem_ade.backends.fem.direct import sparse_code
+
+    default = sparse_code()
+    other = "superlu" if default == "pardiso" else "pardiso"
+    return [default] + ([other] if other == "superlu" or pardiso.available() else [])
+
+
+@contextmanager
+def sparse(code: str):
+    """The direct solves by ``code`` inside (FEM_ADE_SPARSE)."""
+    from fem_ade.backends.fem.direct import SPARSE_ENV
+
+    before = os.environ.get(SPARSE_ENV)
+    os.environ[SPARSE_ENV] = code
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ[SPARSE_ENV]
+        else:
+            os.environ[SPARSE_ENV] = before
 
 
 def branch_folder(root: Path, eps: float) -> Path:
@@ -97,27 +132,43 @@ def main(argv=None) -> dict:
     root = args.out / ("solver_bench_quick" if args.quick else "solver_bench")
     result = {}
     first = 0.04 if args.quick else 0.005
+    codes = sparse_codes()
     for eps in (first, 0.0025) if args.small else (first,):
         folder = branch_folder(root, eps)
-        r = measure(folder, args.old and eps == first)
-        r["point_m0_s"] = round(r["newton_direct_s"] + r["stability_m0_s"], 2)
-        r["point_m8_s"] = round(r["newton_direct_s"] + r["stability_m8_s"], 2)
+        r = {}
+        for code in codes:
+            with sparse(code):
+                rc = measure(folder, args.old and eps == first and code == codes[0])
+            rc["point_m0_s"] = round(rc["newton_direct_s"] + rc["stability_m0_s"], 2)
+            rc["point_m8_s"] = round(rc["newton_direct_s"] + rc["stability_m8_s"], 2)
+            r = r or rc  # the default code's figures at the top
+            r[code] = {k: rc[k] for k in CODE_KEYS}
+            print(f"eps = {eps:g} ({rc['nodes']} nodes), {code}: Newton {rc['newton_direct_s']} "
+                  f"s ({rc['newton_direct_iterations']} iterations), stability m = 0 "
+                  f"{rc['stability_m0_s']} s, m = 0..8 {rc['stability_m8_s']} s; a point with "
+                  f"m = 0 {rc['point_m0_s']} s, with m <= 8 {rc['point_m8_s']} s", flush=True)
+        r["code"] = codes[0]
+        if len(codes) > 1:
+            a, b = (r[c] for c in codes[:2])
+            r["code_ratios"] = {k: round(b[k] / a[k], 2) for k in CODE_KEYS if k.endswith("_s")}
+            r["codes_agree"] = {"E": abs(a["E_direct"] / b["E_direct"] - 1), "eigenvalues_m0":
+                                float(np.max(np.abs(np.asarray(a["eigenvalues_m0"])
+                                                    / np.asarray(b["eigenvalues_m0"]) - 1)))}
+            print(f"  {codes[1]} / {codes[0]}: " + ", ".join(
+                f"{k} {v}x" for k, v in r["code_ratios"].items())
+                + f"; E equal to {r['codes_agree']['E']:.1e}, the m = 0 eigenvalues to "
+                f"{r['codes_agree']['eigenvalues_m0']:.1e}", flush=True)
         if "newton_minres_s" in r:
             r["point_before_s"] = round(r["newton_minres_s"] + r["stability_m0_old_s"], 2)
             r["speedup_point_m0"] = round(r["point_before_s"] / r["point_m0_s"], 1)
             r["speedup_newton"] = round(r["newton_minres_s"] / r["newton_direct_s"], 1)
             r["speedup_stability_m0"] = round(r["stability_m0_old_s"] / r["stability_m0_s"], 1)
-        result[f"{eps:g}"] = r
-        print(f"eps = {eps:g} ({r['nodes']} nodes): Newton {r['newton_direct_s']} s "
-              f"({r['newton_direct_iterations']} iterations), stability m = 0 "
-              f"{r['stability_m0_s']} s, m = 0..8 {r['stability_m8_s']} s; a point with m = 0 "
-              f"{r['point_m0_s']} s, with m <= 8 {r['point_m8_s']} s", flush=True)
-        if "point_before_s" in r:
             print(f"  before: Newton-MINRES {r['newton_minres_s']} s, ARPACK regular mode "
                   f"{r['stability_m0_old_s']} s: a point {r['point_before_s']} s; "
                   f"{r['speedup_point_m0']}x (Newton {r['speedup_newton']}x, stability "
                   f"{r['speedup_stability_m0']}x); eigenvalues agree to "
                   f"{r['eigenvalues_agree']:.1e}", flush=True)
+        result[f"{eps:g}"] = r
     small = result.get("0.0025")
     checks = {"point_m0_s": result[f"{first:g}"]["point_m0_s"],
               "point_m8_s": result[f"{first:g}"]["point_m8_s"],

@@ -7,6 +7,8 @@ taken out, the inertia's count, the command line."""
 
 import json
 import math
+import platform
+import sys
 
 import numpy as np
 import pytest
@@ -92,6 +94,93 @@ def test_a_factorization_is_of_its_own_parameters():
     assert residual(new, x) < 1e-8
     assert residual(new, x_old) > 1e3 * residual(new, x)
     assert new.bordered is not old.bordered
+
+
+#: the test extra installs MKL here (pyproject.toml's marker): there PARDISO must be found
+MKL_EXPECTED = sys.platform == "linux" and platform.machine() == "x86_64"
+
+
+def _pardiso_or_skip():
+    from fem_ade.backends.fem import pardiso
+
+    if not pardiso.available():
+        assert not MKL_EXPECTED, "the test extra installs mkl on Linux x86-64: mkl_rt not found"
+        pytest.skip("MKL is not installed")
+
+
+@pytest.mark.parametrize("below", [0, 2])
+def test_the_sparse_codes_agree(prolate, below):
+    """PARDISO's L D Lᵀ and SuperLU's L U of the bordered H − σP of the prolate's m = 0
+    block (σ below its lowest eigenvalue, or between its second and third) solve alike to
+    1e-9 and count the same eigenvalues below σ (the inertia), with no pivot perturbed."""
+    from fem_ade.backends.fem.direct import count_below
+
+    _pardiso_or_skip()
+    _, be = prolate
+    sys_ = NewtonSystem(be)
+    lin = linearize(sys_, be.phi.copy())
+    block = M.mode_block(sys_, lin, 0)
+    values = M.lowest(sys_, lin, 0, k=3).eigenvalues
+    shift = -1e-6 if below == 0 else 0.5 * (values[1] + values[2])
+    b = np.sin(3 * be.space.doflocs[1]) * be.space.weights
+    out = {}
+    for code in ("pardiso", "superlu"):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setenv("FEM_ADE_SPARSE", code)
+            F, B = M.block_factor(sys_, block, shift)
+        assert F.factor.code == code
+        out[code] = (B.solve(b)[0], count_below(F, B))
+    (xp, np_), (xs, ns) = out["pardiso"], out["superlu"]
+    assert np.linalg.norm(xp - xs) <= 1e-9 * np.linalg.norm(xs)
+    assert np_ == ns == below
+
+
+def test_a_perturbed_pivot_is_not_kept():
+    """Where PARDISO has to perturb a pivot (an exact 0 in this order) its factorization is
+    inexact: the matrix goes to SuperLU instead, which refuses it as singular, as before."""
+    import scipy.sparse as sp
+
+    from fem_ade.backends.fem import pardiso
+    from fem_ade.backends.fem.direct import Factorization
+
+    _pardiso_or_skip()
+    A = sp.csr_matrix(np.diag([1.0, 0.0, -1.0]))
+    with pytest.raises(pardiso.Perturbed):
+        pardiso.LDL(A)
+    with pytest.raises(RuntimeError, match="singular"):
+        Factorization(A, np.arange(3), code="pardiso")
+    F = Factorization(sp.csr_matrix(np.diag([1.0, 1e-12, -1.0])), np.arange(3), code="pardiso")
+    assert F.code == "pardiso" and F.negative == 1
+
+
+def test_the_sparse_code_is_chosen_by_its_variable(monkeypatch):
+    """FEM_ADE_SPARSE chooses the code; auto is PARDISO where MKL is, an unknown name is
+    refused with the names."""
+    from fem_ade.backends.fem import pardiso
+    from fem_ade.backends.fem.direct import sparse_code
+    from fem_ade.model.params import ModelError
+
+    monkeypatch.setenv("FEM_ADE_SPARSE", "superlu")
+    assert sparse_code() == "superlu"
+    monkeypatch.setenv("FEM_ADE_SPARSE", "auto")
+    assert sparse_code() == ("pardiso" if pardiso.available() else "superlu")
+    monkeypatch.setenv("FEM_ADE_SPARSE", "umfpack")
+    with pytest.raises(ModelError, match="superlu, pardiso"):
+        sparse_code()
+
+
+def test_the_upper_triangle_stores_every_diagonal_entry():
+    """PARDISO's form of a symmetric matrix: its upper triangle by rows, sorted, with a
+    diagonal entry stored even where it is 0 (an unstored one is an error there)."""
+    import scipy.sparse as sp
+
+    from fem_ade.backends.fem.pardiso import upper
+
+    A = sp.csr_matrix(np.array([[0.0, 2.0, 0.0], [2.0, 3.0, 1.0], [0.0, 1.0, 0.0]]))
+    U = upper(A)
+    assert U.has_sorted_indices and U.indices.dtype == np.int32
+    assert [list(U.indices[U.indptr[i]:U.indptr[i + 1]]) for i in range(3)] == [[0, 1], [1, 2], [2]]
+    assert np.array_equal(U.toarray(), np.triu(A.toarray()))
 
 
 def test_the_m0_block_equals_the_iterative_eigensolve(prolate):

@@ -400,10 +400,15 @@ def check_ade_azimuthal(result, out):
 
 def check_solver_bench(result, out):
     """At ε = 0.04: one continuation point by both solvers to the same energy, the m = 0
-    block by both eigen-solvers to 1e-8, every time positive."""
+    block by both eigen-solvers to 1e-8, and by both sparse codes where both are installed
+    (PARDISO first, the default there), every time positive."""
     r = result["0.04"]
     assert r["E_direct"] == pytest.approx(r["E_minres"], rel=1e-9)
     assert r["eigenvalues_agree"] < 1e-8
+    assert r["code"] in ("pardiso", "superlu") and r["code"] in r
+    if "code_ratios" in r:
+        assert r["code"] == "pardiso" and "superlu" in r
+        assert r["codes_agree"]["E"] < 1e-9 and r["codes_agree"]["eigenvalues_m0"] < 1e-8
     assert all(r[k] > 0 for k in ("newton_direct_s", "stability_m0_s", "stability_m8_s"))
     assert (out / "solver_bench_quick.json").is_file()
 
