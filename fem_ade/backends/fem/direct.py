@@ -19,13 +19,15 @@ operator of the stencil of K,
 whose Schur complement on v is H exactly (eliminate q). On a tensor mesh K = K_r ⊗ W_z +
 W_r ⊗ K_z couples a node only along its grid lines within its cells, so a grid line on a cell
 boundary separates the grid: :func:`nested_dissection` orders the nodes by such lines
-(George 1973), both unknowns of a node together, and SuperLU factors the permuted matrix
-without pivoting (a symmetric order keeps its fill): 1.7 s and 5e7 entries there.
+(George 1973), both unknowns of a node together, and the permuted matrix is factored in that
+order (:class:`Factorization`): by MKL's PARDISO as L D Lᵀ (:mod:`fem_ade.backends.fem.
+pardiso`: 0.12 s of analysis, 0.40 s, 1.6e7 entries there) where MKL is installed, else by
+SuperLU as L U without pivoting (a symmetric order keeps its fill: 1.05 s, 3.0e7 entries).
 
-Without pivoting the factorization is L U with U = D Lᵀ, so the signs of U's diagonal are
-the inertia of the matrix (Sylvester): the mixed matrix has the N negative directions of its
-−W/κε block and those of H − σP; :attr:`Factorization.negative` counts the latter — the
-number of eigenvalues of H v = λ P v below σ, with no eigen-solve.
+PARDISO's D and, without pivoting, SuperLU's U = D Lᵀ carry the inertia of the matrix
+(Sylvester): the mixed matrix has the N negative directions of its −W/κε block and those of
+H − σP; :attr:`HessianFactor.negative` counts the latter — the number of eigenvalues of
+H v = λ P v below σ, with no eigen-solve.
 
 Borders: :class:`Bordered` solves [[F + U S Uᵀ, C], [Cᵀ, 0]] for a factored F, a few dense
 columns U (the rank-one terms, S = diag(σ)) and C (constraints, pins) by their Schur
@@ -127,8 +129,9 @@ def mixed_matrix(K: sp.spmatrix, w: np.ndarray, ke: float, alpha, gamma, c0: flo
 
 
 #: the sparse code of the factorizations: ``FEM_ADE_SPARSE`` = ``superlu`` (scipy's), ``pardiso``
-#: (MKL's, :mod:`fem_ade.backends.fem.pardiso`: 2.6× faster to factor, measured there) or
-#: ``auto`` (the default: PARDISO where MKL's runtime library is installed, else SuperLU)
+#: (MKL's, :mod:`fem_ade.backends.fem.pardiso`: 0.52 s with its analysis where SuperLU takes
+#: 1.05 s, measured there) or ``auto`` (the default: PARDISO where MKL's runtime library is
+#: installed, else SuperLU)
 SPARSE_ENV, SPARSE_CODES = "FEM_ADE_SPARSE", ("auto", "superlu", "pardiso")
 
 
@@ -193,6 +196,8 @@ class Factorization:
         self.n = A.shape[0]
         Ap = sp.csc_matrix(A)[self.perm][:, self.perm]
         self.code = code or sparse_code()
+        if self.code not in ("pardiso", "superlu"):
+            raise ValueError(f"a sparse code is 'pardiso' or 'superlu', got {self.code!r}")
         if self.code == "pardiso":
             try:
                 self.lu = pardiso.LDL(Ap)

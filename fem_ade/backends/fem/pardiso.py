@@ -19,9 +19,10 @@ solve 0.11 s). Here the nodes come in the project's own order (iparm(5) = 1 with
 identity: the matrix is permuted before), with no scaling or matching and no iterative
 refinement, one PARDISO handle per factorization, released when it is collected.
 
-A pivot PARDISO had to perturb (a near-zero one, iparm(14) > 0) makes the factorization
-inexact and its inertia unreliable: :class:`LDL` raises :class:`Perturbed` then, and the
-caller factors the matrix by SuperLU instead (whose count of a zero pivot raises).
+A pivot PARDISO had to perturb (iparm(14) > 0; in the cases probed an exact zero, while
+pivots of 1e-12 and 1e-20 beside 1 were kept) makes the factorization inexact and its
+inertia unreliable: :class:`LDL` raises :class:`Perturbed` then, and the caller factors the
+matrix by SuperLU instead, which refuses a singular one as it did before PARDISO.
 
 MKL runs sequentially here (its threading layer set to SEQUENTIAL before any other call):
 the project runs one BLAS thread per process by default and a Dask sweep one process per
