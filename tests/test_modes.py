@@ -360,6 +360,30 @@ def test_the_inertia_counts_what_the_eigensolve_finds(tmp_path):
     assert result.unstable[2] == 1 and result.unstable_3d == 2
 
 
+def test_a_shift_near_the_lowest_changes_no_eigenvalue(tmp_path, monkeypatch):
+    """A block's Lanczos started at NEAR · ``near`` gives the eigenvalues and counts of the
+    shift at σ: with ``near`` the lowest itself (the shift used where the inertia counts none
+    below it), twice it (an eigenvalue below the shift tried: back to σ) and half of it; the
+    oblate's m = 2 block has a negative one (the shift tried is above it)."""
+    be = _oblate(tmp_path, modes=3)
+    plain = axisymmetric(be, range(4), 3)
+    shifts = []
+    lanczos = M._lanczos
+    monkeypatch.setattr(M, "_lanczos", lambda block, B, shift, k, which, *a, **kw: (
+        which == "LA" and shifts.append((block.m, shift)),
+        lanczos(block, B, shift, k, which, *a, **kw))[1])
+    for scale in (1.0, 2.0, 0.5):
+        near = {m: scale * plain.lowest(m) for m in plain.modes}
+        shifts.clear()
+        again = axisymmetric(be, range(4), 3, near=near)
+        assert again.unstable == plain.unstable
+        for m in range(4):
+            np.testing.assert_allclose(again.modes[m], plain.modes[m], rtol=1e-8)
+        if scale != 2.0:
+            assert (3, M.NEAR * near[3]) in shifts  # the shift tried was kept
+        assert all(s < plain.lowest(m) for m, s in shifts)  # the lowest above the shift
+
+
 def test_branch_modes_and_bifurcations(tmp_path):
     """fem_ade.branch --modes: each point's lowest eigenvalue per mode and its 3D count in
     branch.csv, and the m = 2 bifurcation of the oblate at ε = 0.04 between v = 0.814 and

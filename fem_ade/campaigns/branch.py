@@ -163,7 +163,7 @@ def follow(scene, *, param: str, start: float, stop: float, step: float, out: Pa
         identity["stability"] = False
     if stable and modes:  # (absent for modes = 0: the folders of before stay theirs)
         identity["modes"] = modes
-    check = _checker(stable, modes)
+    check = stability_check(stable, modes)
     lock = lock_folder(out)
     try:
         identity = open_folder(out, identity)
@@ -221,21 +221,27 @@ def _finish(out: Path, param: str, rows: list[dict], meridians: list,
     return rows
 
 
-def _checker(stable: bool, modes: int):
-    """A point's stability: the m = 0 block's
+def stability_check(stable: bool, modes: int):
+    """A branch point's stability, ``check(be)``: the m = 0 block's
     :data:`fem_ade.campaigns.continuation.EIGENVALUES` lowest, and with ``modes`` the lowest
-    of each block m = 1 … modes (:func:`fem_ade.campaigns.stability.axisymmetric`)."""
+    of each block m = 1 … modes (:func:`fem_ade.campaigns.stability.axisymmetric`), each
+    block's Lanczos started near the lowest eigenvalues of the point checked before (its
+    ``near``: the same eigenvalues, fewer solves); None without ``stable``."""
     if not stable:
         return lambda be: None
     from fem_ade.campaigns.stability import axisymmetric
 
+    before: dict = {}  # the lowest per mode of the point checked before
+
     def check(be):
-        out = axisymmetric(be, (0,), EIGENVALUES)
+        out = axisymmetric(be, (0,), EIGENVALUES, near=before)
         if modes:
-            more = axisymmetric(be, range(1, modes + 1), 1)
+            more = axisymmetric(be, range(1, modes + 1), 1, near=before)
             out.modes.update(more.modes)
             out.unstable.update(more.unstable)
             out.unstable_3d += more.unstable_3d
+        before.clear()
+        before.update({m: out.lowest(m) for m in out.modes if out.lowest(m) is not None})
         return out
     return check
 

@@ -98,10 +98,13 @@ class Stability:
 
 
 def axisymmetric(be, modes=range(MODES + 1), k: int = EIGENVALUES,
-                 below: float | None = None) -> Stability:
+                 below: float | None = None, near: dict | None = None) -> Stability:
     """The stability of an axisymmetric backend's state in the azimuthal ``modes``: per mode
     the ``k`` lowest eigenvalues and the count below ``below`` (default :func:`threshold`;
-    module docstring)."""
+    module docstring). ``near`` {m: an eigenvalue near the block's lowest} — a neighbouring
+    state's, e.g. the previous branch point's :meth:`Stability.lowest` — lets a block's
+    Lanczos start from a shift nearer its lowest (:func:`fem_ade.backends.fem.modes.lowest`:
+    fewer solves; the same eigenvalues and counts)."""
     import time
 
     from fem_ade.backends.fem.modes import lowest
@@ -113,7 +116,7 @@ def axisymmetric(be, modes=range(MODES + 1), k: int = EIGENVALUES,
     sigma = threshold(be.params) if below is None else below
     for m in modes:
         t0 = time.perf_counter()
-        result = lowest(sys_, lin, int(m), k=k, sigma=sigma)
+        result = lowest(sys_, lin, int(m), k=k, sigma=sigma, near=(near or {}).get(int(m)))
         out.modes[int(m)] = result.eigenvalues
         out.unstable[int(m)] = result.unstable
         out.seconds[int(m)] = round(time.perf_counter() - t0, 3)

@@ -211,16 +211,30 @@ def block_factor(sys_, block: ModeBlock, sigma: float):
 TOL, MIN_NCV = 1e-9, 8
 
 
+#: where a shift is tried first when the caller knows an eigenvalue near the block's lowest
+#: (``near``: the previous branch point's): at this fraction of it. Shift-invert Lanczos
+#: converges in fewer solves the nearer the shift is to the lowest eigenvalue; measured (the
+#: prolate at ε = 0.005, k = 1, blocks m = 3 … 8): 136 solves with the shift at σ, 104 at the
+#: lowest of block m − 1, 76 at 0.9 of the block's own lowest, 70 at 0.95. Along the committed
+#: branches with modes (the prolate at ε = 0.01, 66 steps; the oblate at ε = 0.005) a block's
+#: lowest moved down by at most 3 % from one point to the next for m ≥ 2 (m = 0: 4.4 %; m = 1,
+#: whose lowest is near 0: 27 %, where the inertia finds an eigenvalue below the shift tried
+#: and the shift goes back to σ: one factorization more).
+NEAR = 0.9
+
+
 def lowest(sys_, lin, m: int, k: int = 4, sigma: float = -1e-6,
-           tol: float = TOL) -> ModeResult:
+           tol: float = TOL, near: float | None = None) -> ModeResult:
     """The ``k`` lowest eigenvalues of H_m v = λ P_m v on the constrained space of mode
     ``m`` (module docstring) and the count below ``sigma`` (the unstable directions), by
     shift-invert Lanczos: the k nearest above a shift below which the inertia counts none.
-    That shift is ``sigma`` itself for a state with none below it; else it is moved down —
+    That shift is :data:`NEAR` · ``near`` where that is above ``sigma`` and the inertia counts
+    none below it (``near``: an eigenvalue expected near the lowest, e.g. the previous branch
+    point's); else ``sigma`` itself for a state with none below it; else it is moved down —
     past the nearest eigenvalue below (found by the same LU), then by doubling — until the
     inertia counts none below it."""
     block = mode_block(sys_, lin, m)
-    B, shift, below = _clear_shift(sys_, block, sigma, tol)
+    B, shift, below = _clear_shift(sys_, block, sigma, tol, near)
     dim = block.size - len(block.constraints)
     k = min(k, dim - 2)
     values = _lanczos(block, B, shift, k, "LA", tol) if k > 0 else np.zeros(0)
@@ -242,11 +256,17 @@ def lowest_mode(sys_, lin, m: int, sigma: float = -1e-6,
     return float(values[0]), psi
 
 
-def _clear_shift(sys_, block: ModeBlock, sigma: float, tol: float):
+def _clear_shift(sys_, block: ModeBlock, sigma: float, tol: float,
+                 near: float | None = None):
     """(the bordered factor at a shift with no eigenvalue below it, that shift, the count
-    below ``sigma``): ``sigma`` itself where none is below it (see :func:`lowest`)."""
+    below ``sigma``): :data:`NEAR` · ``near`` or ``sigma`` itself where none is below it (see
+    :func:`lowest`)."""
     from fem_ade.backends.fem.direct import count_below
 
+    if near is not None and NEAR * near > sigma:
+        F, B = block_factor(sys_, block, NEAR * near)
+        if count_below(F, B) == 0:  # none below it, so none below σ either
+            return B, NEAR * near, 0
     F, B = block_factor(sys_, block, sigma)
     below = count_below(F, B)
     shift = sigma
