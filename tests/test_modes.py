@@ -169,6 +169,45 @@ def test_the_sparse_code_is_chosen_by_its_variable(monkeypatch):
         sparse_code()
 
 
+def _laplacian(n: int, shift: float):
+    """The 2D 5-point Laplacian on an n × n grid less ``shift`` (indefinite for a shift
+    between its eigenvalues)."""
+    import scipy.sparse as sp
+
+    T = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n))
+    return sp.csr_matrix(sp.kronsum(T, T) - shift * sp.identity(n * n))
+
+
+def test_an_analysis_is_reused_only_by_a_dead_factorization_of_its_pattern():
+    """PARDISO's analysis of a pattern is kept when its factorization is collected and used
+    again for a matrix of that pattern: the factorization so made solves and counts exactly
+    as a fresh one; a live factorization keeps its own (the next one is analysed anew and
+    the first still solves its own matrix); another pattern is analysed anew."""
+    import scipy.sparse as sp
+
+    from fem_ade.backends.fem import pardiso
+
+    _pardiso_or_skip()
+    pardiso.clear_pool()
+    A1, A2 = _laplacian(30, 0.3), _laplacian(30, 0.9)
+    b = np.linspace(-1.0, 2.0, 900)
+    fresh = pardiso.LDL(A2)
+    x_fresh, negative = fresh.solve(b), fresh.negative
+    del fresh
+    pardiso.clear_pool()
+    first = pardiso.LDL(A1)
+    second = pardiso.LDL(A2)  # the first alive: a handle of its own
+    assert not first.reused and not second.reused
+    assert np.allclose(A1 @ first.solve(b), b, atol=1e-10)
+    del first, second
+    reused = pardiso.LDL(A2)
+    assert reused.reused
+    assert np.array_equal(reused.solve(b), x_fresh) and reused.negative == negative > 0
+    other = pardiso.LDL(sp.diags([-1.0, 2.5, -1.0], [-1, 0, 1], shape=(900, 900)))  # 1D
+    assert not other.reused
+    pardiso.clear_pool()
+
+
 def test_the_upper_triangle_stores_every_diagonal_entry():
     """PARDISO's form of a symmetric matrix: its upper triangle by rows, sorted, with a
     diagonal entry stored even where it is 0 (an unstored one is an error there)."""
