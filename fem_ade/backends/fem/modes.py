@@ -214,8 +214,8 @@ TOL, MIN_NCV = 1e-9, 8
 #: where a shift is tried first when the caller knows an eigenvalue near the block's lowest
 #: (``near``: the previous branch point's): at this fraction of it. Shift-invert Lanczos
 #: converges in fewer solves the nearer the shift is to the lowest eigenvalue; measured (the
-#: prolate at ε = 0.005, k = 1, blocks m = 3 … 8): 136 solves with the shift at σ, 104 at the
-#: lowest of block m − 1, 76 at 0.9 of the block's own lowest, 70 at 0.95. Along the committed
+#: prolate at ε = 0.005, k = 1, blocks m = 3 … 8): 136 solves with the shift at σ, 116 at the
+#: lowest of block m − 1, 76 at 0.9 of the block's own lowest, 72 at 0.95. Along the committed
 #: branches with modes (the prolate at ε = 0.01, 66 steps; the oblate at ε = 0.005) a block's
 #: lowest moved down by at most 3 % from one point to the next for m ≥ 2 (m = 0: 4.4 %; m = 1,
 #: whose lowest is near 0: 27 %, where the inertia finds an eigenvalue below the shift tried

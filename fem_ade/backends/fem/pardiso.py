@@ -145,7 +145,7 @@ class _Handle:
             self.iparm[k] = v
         self.perm = np.arange(self.n, dtype=np.int32)
         self.indptr, self.indices = U.indptr, U.indices
-        self.sound = False  # its analysis done and its last call returned without error
+        self.sound = False  # its (analysis and) factorization returned without an error
 
     def of(self, U: sp.csr_matrix) -> bool:
         """Whether this handle analysed the pattern of ``U``."""
