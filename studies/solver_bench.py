@@ -28,10 +28,12 @@ one_thread()
 
 import os  # noqa: E402
 import time  # noqa: E402
-from contextlib import contextmanager  # noqa: E402
 from pathlib import Path  # noqa: E402
+from unittest import mock  # noqa: E402
 
 import numpy as np  # noqa: E402
+
+from fem_ade.backends.fem.direct import SPARSE_ENV  # noqa: E402
 
 OUT = Path("runs") / "studies"
 #: (ε, R₀, from, to): the branches the points are taken from
@@ -51,22 +53,6 @@ def sparse_codes() -> list[str]:
     default = sparse_code()
     other = "superlu" if default == "pardiso" else "pardiso"
     return [default] + ([other] if other == "superlu" or pardiso.available() else [])
-
-
-@contextmanager
-def sparse(code: str):
-    """The direct solves by ``code`` inside (FEM_ADE_SPARSE)."""
-    from fem_ade.backends.fem.direct import SPARSE_ENV
-
-    before = os.environ.get(SPARSE_ENV)
-    os.environ[SPARSE_ENV] = code
-    try:
-        yield
-    finally:
-        if before is None:
-            del os.environ[SPARSE_ENV]
-        else:
-            os.environ[SPARSE_ENV] = before
 
 
 def branch_folder(root: Path, eps: float) -> Path:
@@ -150,7 +136,7 @@ def main(argv=None) -> dict:
         folder = branch_folder(root, eps)
         r = {}
         for code in codes:
-            with sparse(code):
+            with mock.patch.dict(os.environ, {SPARSE_ENV: code}):  # restored after
                 rc = measure(folder, args.old and eps == first and code == codes[0])
             rc["point_m0_s"] = round(rc["newton_direct_s"] + rc["stability_m0_s"], 2)
             rc["point_m8_s"] = round(rc["newton_direct_s"] + rc["stability_m8_s"], 2)

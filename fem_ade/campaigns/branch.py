@@ -241,7 +241,7 @@ def stability_check(stable: bool, modes: int):
             out.unstable.update(more.unstable)
             out.unstable_3d += more.unstable_3d
         before.clear()
-        before.update({m: out.lowest(m) for m in out.modes if out.lowest(m) is not None})
+        before.update({m: out.lowest(m) for m in out.modes})  # (None: no shift tried)
         return out
     return check
 

@@ -109,31 +109,6 @@ def available() -> bool:
     return library() is not None
 
 
-def _call(lib, pt, iparm, phase: int, n: int, U, perm, b=None):
-    """One call of pardiso on the handle ``pt`` (x, or None for the phases without one)."""
-    nrhs = 1 if b is None or b.ndim == 1 else b.shape[1]
-    rhs = np.zeros(n) if b is None else np.asfortranarray(b, dtype=float)
-    x = np.zeros_like(rhs)
-    err = ctypes.c_int32(0)
-
-    def i32(v):
-        return ctypes.byref(ctypes.c_int32(v))
-
-    lib.pardiso(pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), i32(1), i32(1),
-                i32(SYMMETRIC_INDEFINITE), i32(phase), i32(n),
-                None if U is None else U.data.ctypes.data,
-                None if U is None else U.indptr.ctypes.data_as(_INT),
-                None if U is None else U.indices.ctypes.data_as(_INT),
-                perm.ctypes.data_as(_INT), i32(nrhs), iparm.ctypes.data_as(_INT), i32(0),
-                rhs.ctypes.data, x.ctypes.data, ctypes.byref(err))
-    if err.value:
-        message = f"PARDISO (phase {phase}): {ERRORS.get(err.value, 'error')} ({err.value})"
-        if err.value == -2:
-            raise MemoryError(message)
-        raise ArithmeticError(message)
-    return x if b is not None else None
-
-
 class _Handle:
     """A PARDISO handle with its options, the identity order and the pattern it analysed."""
 
@@ -153,7 +128,29 @@ class _Handle:
                 and np.array_equal(self.indices, U.indices))
 
     def call(self, phase: int, U=None, b=None):
-        return _call(self.lib, self.pt, self.iparm, phase, self.n, U, self.perm, b)
+        """One call of pardiso on this handle (x for the solve phase with ``b``, else None)."""
+        nrhs = 1 if b is None or b.ndim == 1 else b.shape[1]
+        rhs = np.zeros(self.n) if b is None else np.asfortranarray(b, dtype=float)
+        x = np.zeros_like(rhs)
+        err = ctypes.c_int32(0)
+
+        def i32(v):
+            return ctypes.byref(ctypes.c_int32(v))
+
+        self.lib.pardiso(self.pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), i32(1), i32(1),
+                         i32(SYMMETRIC_INDEFINITE), i32(phase), i32(self.n),
+                         None if U is None else U.data.ctypes.data,
+                         None if U is None else U.indptr.ctypes.data_as(_INT),
+                         None if U is None else U.indices.ctypes.data_as(_INT),
+                         self.perm.ctypes.data_as(_INT), i32(nrhs),
+                         self.iparm.ctypes.data_as(_INT), i32(0), rhs.ctypes.data,
+                         x.ctypes.data, ctypes.byref(err))
+        if err.value:
+            message = f"PARDISO (phase {phase}): {ERRORS.get(err.value, 'error')} ({err.value})"
+            if err.value == -2:
+                raise MemoryError(message)
+            raise ArithmeticError(message)
+        return x if b is not None else None
 
     def release(self):
         """All of the handle's memory freed (phase −1)."""
@@ -228,7 +225,6 @@ class LDL:
         if lib is None:
             raise RuntimeError("MKL's runtime library (mkl_rt) is not installed: pip install mkl")
         self.U = upper(A)
-        self.n = self.U.shape[0]
         handle = _take(lib, self.U)
         self.reused = handle is not None  # the analysis of a pattern seen before
         handle = handle or _Handle(lib, self.U)
