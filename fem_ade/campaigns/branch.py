@@ -80,6 +80,11 @@ from fem_ade.scenes.vesicle import PARAMETERS, get_parameter, set_parameter  # n
 
 #: the most azimuthal modes a branch computes at each point, and the command line's default
 MAX_MODES, DEFAULT_MODES = 32, 8
+#: the first point's relaxation (the steady recipe) stops where E changes by less than this
+#: per step (relative), then Newton: looser is not cheaper everywhere — measured at
+#: ε = 0.005, one thread: the prolate at v = 0.69 36 s at 1e-9 (Newton 2 iterations), 8 s at
+#: 1e-7 (6); the pear seeded at (v, Δa₀) = (0.8, 1.64) 255 s (8) and 283 s (52)
+SETTLE = 1e-9
 
 
 # ---------------------------------------------------------------------------------------------
@@ -280,7 +285,7 @@ def _branch_setup(scene, param: str, start: float, stop: float, step: float, n, 
     scene = replace(scene, params=set_parameter(scene.params, param, start))
     steady = recipe("steady", scene)
     config = RunConfig.build(scene, backend="fem", n=n, dt=steady["dt"],
-                             until_steady=1e-9, max_steps=20000, scheme="stabilized",
+                             until_steady=SETTLE, max_steps=20000, scheme="stabilized",
                              constraints="exact", accelerate=True, backend_options=options)
     config.check(scene)
     identity = {"scene": scene.name, "params": scene.params.as_dict(), "param": param,
@@ -298,7 +303,7 @@ def _first_point(be, param: str, cont, out: Path, dt: float, say, check, tag: st
     from fem_ade.engine.loop import run_loop
 
     t0 = time.perf_counter()
-    run_loop(be, dt=dt, until_steady=1e-9, max_steps=20000, every=10, accelerate=True)
+    run_loop(be, dt=dt, until_steady=SETTLE, max_steps=20000, every=10, accelerate=True)
     newton = solve_steady(be, max_iterations=60)
     if not newton.converged:
         raise ModelError(f"the branch's first point did not converge: {newton.message}")
