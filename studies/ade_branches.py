@@ -15,10 +15,8 @@ branch continued along a finer m₀ grid).
 * **Sharp**: each branch solved at an anchor and continued along m₀ = 0.8, 0.84, …, 1.64
   (``studies/ade_plane.py``'s ``follow``) until it is lost.
 * The lowest of all (the torus included) at each grid point, and the transitions along each
-  line: where the lowest branch's e crosses the next one's
-  (``fem_ade.campaigns.branch_analysis.crossing``;
-  sharp: linear between the m₀ grid's points — the difference of two branches' e is nearly
-  linear in m₀, as each is w + q(da − m₀)² with da slowly varying).
+  line: where the lowest branch's e crosses the next one's, both as cubic splines in Δa₀
+  (phase field) or m₀ (sharp) through their points (``_lib.lines.cross``).
 
 The lines are the points of one branch sweep built from this plan (:mod:`fem_ade.campaigns.sweep`,
 ``OUT/ade_branches/sweep/points/v=V_LINE``: a Dask task per line, resumable, a line that
@@ -32,7 +30,7 @@ Writes ``OUT/ade_branches.md``, ``OUT/ade_branches.json`` and ``OUT/ade-branches
 ``OUT/ade_branches/sharp/`` (a cache file per branch and v). ``--report-only`` rebuilds the
 report from those three, solving and following nothing.
 
-    python studies/ade_branches.py --out studies/results        # ~1 h on 2 cores
+    python studies/ade_branches.py --out studies/results        # the lines ~20 min on 2 cores
     python studies/ade_branches.py --quick                      # the code (a few minutes)
     python studies/ade_branches.py --out studies/results --report-only
 
@@ -62,6 +60,7 @@ from _lib.lines import (  # noqa: E402
     archived_sharp,
     archived_sizes,
     at,
+    cross,
     curve,
     kept,
     kept_lines,
@@ -126,11 +125,11 @@ def lowest(values: dict) -> str | None:
 
 
 def transitions(curves: dict, key: str) -> list[dict]:
-    """Along one line: where the lowest branch changes, as the crossing of the two branches
-    (``fem_ade.campaigns.branch_analysis.crossing``) on a fine grid of Δa₀."""
+    """Along one line: where the lowest branch changes, as the crossing of the two branches'
+    e (:func:`_lib.lines.cross` of their :func:`_lib.lines.curve`: cubic splines, as the
+    cells' energies are; the points are 0.03–0.12 apart, over which linear interpolation of
+    the convex e moved a crossing by up to 0.01) found on a fine grid of Δa₀."""
     import numpy as np
-
-    from fem_ade.campaigns.branch_analysis import crossing
 
     fine = np.linspace(DEFAULT_SPAN[0], DEFAULT_SPAN[1], 421)
     values = [{b: energy_at(rows, x, key) for b, rows in curves.items()} for x in fine]
@@ -143,13 +142,12 @@ def transitions(curves: dict, key: str) -> list[dict]:
         both = all(values[j].get(c) is not None for j in (i, i + 1) for c in (a, b))
         x = None
         if both:  # a crossing: where the two branches' e are equal
-            x = crossing(sorted(curves[a], key=lambda r: r[key]),
-                         sorted(curves[b], key=lambda r: r[key]), key)
+            x = cross(curve(curves[a], key), curve(curves[b], key), (fine[i] + fine[i + 1]) / 2)
             x = x if x is not None and fine[i] - 0.01 <= x <= fine[i + 1] + 0.01 else None
         out.append({"from": a, "to": b, "da0": x, "between": [float(fine[i]),
                                                               float(fine[i + 1])],
-                    "note": "" if both else f"{a if values[i + 1].get(a) is None else b} "
-                                            "ends (or begins) here"})
+                    "note": "no crossing found" if both else
+                            f"{a if values[i + 1].get(a) is None else b} ends (or begins) here"})
     return out
 
 
@@ -286,10 +284,6 @@ def write_report(out: Path, result: dict, pf: dict, sharp: dict, suffix: str) ->
              "at one R₀ for all its branches; the sharp membrane (`sharp_ref`) continued along m₀. "
              "e = (W + G)/W_sphere. The lowest branch among prolate, pear, oblate, "
              "stomatocyte and torus where each exists.", "",
-             "**Made with older branch code, not rerun**: the lines were followed at "
-             "e4098a1, before the continuation's predictor (ef4c570, 62a7cce, 69ffa05) and "
-             "its stability without the translation mode (91c4ae2) changed; the notes below "
-             "say what moved where the branches were followed again.", "",
              f"**The phase field's lowest branch is the sharp one's at {agree} of "
              f"{len(pts)} grid points.**", "",
              "| v | R₀ (ε/R₀) | " + " | ".join(f"Δa₀ = {d:g}" for d in

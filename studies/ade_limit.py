@@ -32,7 +32,7 @@ each line archived in ``OUT/ade_limit/lines.json`` once the sweep ends). Needs
 Writes ``OUT/ade_limit.md`` (with the hand-written ``OUT/ade_limit_notes.md``) and
 ``OUT/ade_limit.json``.
 
-    python studies/ade_limit.py --out studies/results        # ~1 h on 2 cores (62 lines)
+    python studies/ade_limit.py --out studies/results        # ~45 min on 2 cores (62 lines)
     python studies/ade_limit.py --out studies/results --report-only
     python studies/ade_limit.py --quick      # the code: ade_branches.py --quick, refined at 0.02
 
@@ -58,11 +58,6 @@ EPS = 0.005
 WINDOW = 0.05
 #: the order in ε assumed for the extrapolation (module docstring)
 ORDER = 2
-#: the branch code the refined lines are followed with, in their archive's key: 2 since the
-#: continuation's predictor, its stability without the translation mode and its convergence
-#: test (``ade_branches.py``'s lines at ε = 0.01 were followed with version 1, e4098a1; their
-#: converged points are steady states either way, the same to Newton's tolerance)
-LINE_VERSION = 2
 #: the pear's own line from each grid cell of its span, ``CELL_SPAN`` down in one step: its
 #: span's lines end within 0.004 of their start at ε = 0.005 (corrections of 12–14 Newton
 #: iterations), so the cells are reached by starting there (a cell's seed is the sharp pear
@@ -130,7 +125,7 @@ def region_keys(reg: dict, R0: float, cfg=FULL) -> list[dict]:
                            (f"{b}@{reg['centre']:.3f}-down",
                             (reg["centre"], reg["span"][0]))):
             keys.append(adl.line_key(reg["v"], b, name, span, R0, cfg.eps, cfg.coarse.step,
-                                    modes=0, version=LINE_VERSION))
+                                    modes=0))
     return keys
 
 
@@ -141,7 +136,7 @@ def cell_keys(reg: dict, R0: float, grid, cfg=FULL) -> dict:
         return {}
     lo, hi = sorted(reg["span"])
     return {x: adl.line_key(reg["v"], "pear", f"pear@{x:.3f}-cell", (x, round(x - CELL_SPAN, 3)),
-                            R0, cfg.eps, CELL_STEP, modes=0, version=LINE_VERSION)
+                            R0, cfg.eps, CELL_STEP, modes=0)
             for x in grid if lo - 1e-9 <= x <= hi + 1e-9}
 
 
@@ -182,22 +177,14 @@ def fine_energy(br: str, x: float, have: list, regs: list[dict], R0: float, shar
 # ---------------------------------------------------------------------------------------------
 # crossings and energies
 # ---------------------------------------------------------------------------------------------
-def cross(a, b, centre: float) -> float | None:
-    """The root of e_a − e_b nearest ``centre`` where both curves are defined (Brent on each
-    sign change of a fine sampling), None where they do not cross."""
-    import numpy as np
-    from scipy.optimize import brentq
-
-    if a is None or b is None:
+def sharp_crossing(sharp_v: dict, a: str, b: str, reg: dict) -> float | None:
+    """The sharp branches' crossing on their cubic splines in m₀ (as the phase field's),
+    where the span was placed at one (``reg["x_sharp"]``, which kept the crossing of the
+    report it was placed from: until 2026-12-07 linear between the m₀ grid's points)."""
+    if reg["x_sharp"] is None:
         return None
-    lo, hi = max(a[1], b[1]), min(a[2], b[2])
-    if not lo < hi:
-        return None
-    xs = np.linspace(lo, hi, 401)
-    d = a[0](xs) - b[0](xs)
-    roots = [float(brentq(lambda x: float(a[0](x) - b[0](x)), xs[i], xs[i + 1]))
-             for i in range(len(xs) - 1) if d[i] == 0.0 or d[i] * d[i + 1] < 0]
-    return min(roots, key=lambda x: abs(x - centre)) if roots else None
+    a_rows, b_rows = ([{"da0": r["m0"], "e": r["e"]} for r in sharp_v.get(c, [])] for c in (a, b))
+    return adl.cross(adl.curve(a_rows), adl.curve(b_rows), reg["x_sharp"])
 
 
 def extrapolate(fine: float | None, coarse: float | None) -> float | None:
@@ -314,14 +301,13 @@ def judged(coarse, sharp, regs, R0, archive, keys01, archive01, cfg=FULL) -> dic
             rows, missing = fine_rows(reg, br, sharp_rows(v), archive, R0[v], cfg)
             curves[(v, br, i)] = fine[br] = adl.curve(rows)
             notes += [f"v = {v:g}, {m}" for m in missing]
-        x01 = cross(c01(v, a), c01(v, b), reg["centre"])
-        x005 = cross(fine[a], fine[b], reg["centre"])
-        x0 = extrapolate(x005, x01)
+        x01 = adl.cross(c01(v, a), c01(v, b), reg["centre"])
+        x005 = adl.cross(fine[a], fine[b], reg["centre"])
+        x0, xs = extrapolate(x005, x01), sharp_crossing(sharp[v], a, b, reg)
         transitions.append({"v": v, "from": a, "to": b, "centre": reg["centre"],
-                            "coarse": x01, "fine": x005, "limit": x0,
-                            "sharp": reg["x_sharp"],
-                            "error": None if x0 is None or reg["x_sharp"] is None
-                            else x0 - reg["x_sharp"], "torus": "torus" in (a, b)})
+                            "coarse": x01, "fine": x005, "limit": x0, "sharp": xs,
+                            "error": None if x0 is None or xs is None else x0 - xs,
+                            "torus": "torus" in (a, b)})
     cells = []
     for p in coarse["points"]:
         v, x = p["v"], p["da0"]

@@ -73,8 +73,8 @@ def check_ade_limit(result, out):
     at eps = 0.02 from Δa₀ = 1.1 up and down to the grid's 1.04 and 1.16: no crossing at
     either ε, the two cells judged by their branches' extrapolated energies (the
     prolate, as the sharp one), each extrapolation the p = 2 formula of the two ε's
-    energies; the refined lines archived with the branch code's version; the report
-    written."""
+    energies; the refined and the coarse lines archived with one branch code's version;
+    the report written."""
     (t,) = result["transitions"]
     assert t["coarse"] is None and t["fine"] is None and t["limit"] is None, t
     inside = [c for c in result["cells"] if c["how"] == "extrapolated"]
@@ -86,8 +86,10 @@ def check_ade_limit(result, out):
             assert math.isclose(e["limit"], e["fine"] + (e["fine"] - e["coarse"]) / 3)
     assert result["agree"] == len(result["cells"]) == 2, result
     lines = json.loads((out / "ade_limit_quick" / "lines.json").read_text())
-    assert len(lines) == 4 and all(x["key"]["version"] == 2 and x["rows"]
-                                   for x in lines.values()), lines
+    coarse = json.loads((out / "ade_branches_quick" / "lines.json").read_text())
+    versions = {x["key"]["version"] for x in [*lines.values(), *coarse.values()]}
+    assert len(lines) == 4 and all(x["rows"] for x in lines.values()), lines
+    assert len(versions) == 1 and None not in versions, versions  # one code, both ε
     assert (out / "ade_limit_quick.md").is_file()
 
 

@@ -53,6 +53,13 @@ PAIRED = {"prolate": "pear", "pear": "prolate", "oblate": "stomatocyte",
 STEP = 0.04
 
 
+#: the branch code the plane's lines are followed with, in their archive's key (a line
+#: archived with another is followed again): 1 at e4098a1; 2 the continuation's predictor,
+#: its stability without the translation mode and its convergence test; 3 direct solves
+#: (PARDISO or SuperLU: Newton's and shift-invert Lanczos's)
+LINE_VERSION = 3
+
+
 #: a genus-0 point whose label names neither branch of its pair is the one whose sharp da is
 #: nearest its surface's, within this (the pear's da is 0.17–0.2 above the prolate's, the
 #: stomatocyte's 0.2–0.6 below the oblate's: ``studies/results/ade_plane.md``; at ε/R₀ = 0.06 the
@@ -86,13 +93,13 @@ def line_key(v: float, branch: str, name: str, span, R0: float, eps: float, step
              **more) -> dict:
     """What a phase-field line is (its archived rows are reused only for the same): the
     branch followed in Δa₀ over ``span`` at v, R₀, ε and κ̄, its step, and the model's
-    physics version; ``more``: what else a study's lines are followed with (``modes``, the
-    branch code's ``version``; this study's lines have neither: version 1, e4098a1)."""
+    physics version and the branch code's (:data:`LINE_VERSION`); ``more``: what else a
+    study's lines are followed with (``modes``)."""
     from fem_ade.model.params import PHYSICS_VERSION
 
     return {"v": v, "branch": branch, "line": name, "from": span[0], "to": span[1],
             "R0": R0, "eps": eps, "kbar": KBAR, "step": step, "physics": PHYSICS_VERSION,
-            **more}
+            "version": LINE_VERSION, **more}
 
 
 def line_point(key: dict) -> dict:
@@ -284,3 +291,21 @@ def curve(rows: list[dict], key: str = "da0", value: str = "e"):
 def at(c, x: float) -> float | None:
     """A :func:`curve` at ``x``, None outside its points (or for no curve)."""
     return None if c is None or not c[1] - 1e-9 <= x <= c[2] + 1e-9 else float(c[0](x))
+
+
+def cross(a, b, centre: float) -> float | None:
+    """The root of e_a − e_b nearest ``centre`` where both curves are defined (Brent on each
+    sign change of a fine sampling), None where they do not cross."""
+    import numpy as np
+    from scipy.optimize import brentq
+
+    if a is None or b is None:
+        return None
+    lo, hi = max(a[1], b[1]), min(a[2], b[2])
+    if not lo < hi:
+        return None
+    xs = np.linspace(lo, hi, 401)
+    d = a[0](xs) - b[0](xs)
+    roots = [float(brentq(lambda x: float(a[0](x) - b[0](x)), xs[i], xs[i + 1]))
+             for i in range(len(xs) - 1) if d[i] == 0.0 or d[i] * d[i + 1] < 0]
+    return min(roots, key=lambda x: abs(x - centre)) if roots else None
