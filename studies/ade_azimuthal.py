@@ -21,7 +21,13 @@ of its unstable directions; the hand-written ``OUT/ade_azimuthal_notes.md``),
 ``OUT/ade_azimuthal/v=V_da0=D`` (a one-point branch; its ``points/`` are not committed).
 A cell whose folder holds its point is not made again; ``--report-only`` makes nothing.
 
+``--refine`` makes each flagged cell (unstable or marginal) again on the meshes of
+:data:`REFINED` — 4 nodes per ε at the plane's ε, ε/2 at 2.5 nodes per ε, and ε/2 at 4
+nodes per ε where those two disagree — at the same v, Δa₀ and R₀, each in
+``OUT/ade_azimuthal/refined/MESH/v=V_da0=D``, and the report says what they decide.
+
     python studies/ade_azimuthal.py --out studies/results          # ~10 min on 2 cores
+    python studies/ade_azimuthal.py --out studies/results --refine # + the flagged cells
     python studies/ade_azimuthal.py --quick                        # the code (a minute)
 
 One thread per worker: ``OPENBLAS_NUM_THREADS=1``, ``FEM_ADE_FFT_WORKERS=1`` unless set.
@@ -44,6 +50,16 @@ GENUS0 = ("prolate", "pear", "oblate", "stomatocyte")
 MODES, KBAR = 8, 1.4
 #: a cell is marginal where its lowest eigenvalue is within this many (ε/R₀)⁴ of zero
 MARGINAL = 0.5
+#: the flagged cells (unstable or marginal at the default resolution) made again by
+#: ``--refine``: (folder, ε as a fraction of the plane's, nodes per ε, heading, only where
+#: the meshes before leave the cell undecided) — the same ε on a finer mesh (does the sign
+#: stand where the mesh resolves it?), half the ε at the same R₀ and the default 2.5 nodes
+#: per ε (does it stand nearer the sharp limit?), and half the ε at 4 nodes per ε where
+#: those two disagree (is the sign at ε/2 the mesh's?). A cell is decided by the first and
+#: the last of these made at it (:func:`decided`)
+REFINED = (("nodes=4", 1.0, 4.0, "4 nodes per ε", False),
+           ("half-eps", 0.5, 2.5, "ε/2, 2.5 per ε", False),
+           ("half-eps-4", 0.5, 4.0, "ε/2, 4 per ε", True))
 #: the quick cells: (v, Δa₀, branch, R₀) at ε = 0.04, modes m ≤ 3
 QUICK = [(0.9, 0.8, "oblate", 0.25), (0.85, 1.16, "prolate", 0.2)]
 QUICK_EPS, QUICK_MODES = 0.04, 3
@@ -80,14 +96,19 @@ def scene_of(cell: dict):
 
 
 def make_cell(args) -> str | None:
-    """The cell's point and its modes (a one-point branch in Δa₀); None, or why not."""
-    cell, folder, modes = args
+    """The cell's point and its modes (a one-point branch in Δa₀, with ``per_eps`` nodes per
+    ε: None the default); None, or why not."""
+    cell, folder, modes, per_eps = args
+    from fem_ade.backends.fem.axisym import DEFAULT_ORDER, default_nodes
     from fem_ade.campaigns.branch import follow
     from fem_ade.model.params import ModelError
 
     try:
-        follow(scene_of(cell), param="da0", start=cell["da0"], stop=cell["da0"] - 0.002,
-               step=0.002, out=folder, quiet=True, max_points=1, modes=modes)
+        scene = scene_of(cell)
+        n = None if per_eps is None else default_nodes(cell["eps"], scene.params.L,
+                                                       DEFAULT_ORDER, per_eps)
+        follow(scene, param="da0", start=cell["da0"], stop=cell["da0"] - 0.002,
+               step=0.002, out=folder, quiet=True, max_points=1, modes=modes, n=n)
     except (ModelError, ArithmeticError) as err:
         return f"{type(err).__name__}: {err}"
     return None
@@ -95,7 +116,8 @@ def make_cell(args) -> str | None:
 
 def summarize(root: Path, todo: list[dict], modes: int) -> dict:
     """Per cell: the shape its point is, its 3D unstable count, the modes below the
-    threshold, its lowest eigenvalue in units of (ε/R₀)⁴ and whether that is marginal."""
+    threshold, its lowest eigenvalue in units of (ε/R₀)⁴ (``lows``: each mode's) and whether
+    that is marginal."""
     from fem_ade.campaigns.branch_analysis import same_branch
     from fem_ade.campaigns.branch_folder import read_branch_table
     from fem_ade.campaigns.stability import UNSTABLE, shape_scale
@@ -118,11 +140,18 @@ def summarize(root: Path, todo: list[dict], modes: int) -> dict:
                          unstable_3d=r.get("unstable_3d"),
                          below_threshold=[m for m, x in lows.items() if x < UNSTABLE * scale],
                          modes_below=[m for m, x in lows.items() if x < -MARGINAL * scale],
-                         lowest=lows[m_low] / scale, lowest_m=m_low,
+                         lowest=_digits(lows[m_low] / scale), lowest_m=m_low,
+                         lows={str(m): _digits(x / scale) for m, x in lows.items()},
                          marginal=abs(lows[m_low]) < MARGINAL * scale,
                          e=r["e"], seconds=r.get("seconds"))
         out.append(entry)
     return {"modes": modes, "marginal": MARGINAL, "cells": out}
+
+
+def _digits(x: float) -> float:
+    """A scaled eigenvalue to the 4 significant digits the meshes' differences leave
+    meaningful (2.5 and 4 nodes per ε differ in the second)."""
+    return float(f"{x:.4g}")
 
 
 def write_report(out: Path, result: dict, suffix: str) -> None:
@@ -160,10 +189,70 @@ def write_report(out: Path, result: dict, suffix: str) -> None:
               "its mark, and its lowest eigenvalue over the blocks in units of (ε/R₀)⁴ with "
               "its m.", "",
               f"![the ADE plane's genus-0 lowest shapes in 3D](ade_azimuthal{suffix}.png)", ""]
+    lines += refined_report(result)
     notes = out / f"ade_azimuthal{suffix}_notes.md"
     if notes.is_file():
         lines += [notes.read_text().rstrip(), ""]
     (out / f"ade_azimuthal{suffix}.md").write_text("\n".join(lines))
+
+
+def refined_report(result: dict) -> list[str]:
+    """The refined cells' table (``--refine``): each flagged cell's lowest eigenvalue and
+    its mark at the plane's mesh and at each of :data:`REFINED`'s, and what they decide
+    (:func:`decided`)."""
+    refined = result.get("refined")
+    if not refined:
+        return []
+    base = {cell_name(c): c for c in result["cells"]}
+    names = [r for r in REFINED if r[0] in refined]
+    lines = ["## The flagged cells refined", "",
+             "Each cell unstable or marginal above, made again with "
+             + " and with ".join(f"{h} (ε = {refined[n][0]['eps']:g})"
+                                 for n, _, _, h, _ in names if refined[n])
+             + " at the same v, Δa₀ and R₀: its lowest eigenvalue over the blocks in units of "
+             "that mesh's (ε/R₀)⁴, its m, and its mark. Decided by 4 nodes per ε at ε and "
+             "ε/2 at 2.5 per ε, or where those two disagree by the 4 per ε meshes at both ε: "
+             f"unstable where both put a common mode below −{MARGINAL:g} (ε/R₀)⁴, stable "
+             "where neither has one nor is marginal.", "",
+             "| v | Δa₀ | branch | plane's mesh | " + " | ".join(r[3] for r in names)
+             + " | decided |", "|---|---|---|---|" + "---|" * len(names) + "---|"]
+    for key, c in base.items():
+        at = [next((x for x in refined[n] if cell_name(x) == key), None) for n, *_ in names]
+        if all(x is None for x in at):
+            continue
+        made = [(x, r) for x, r in zip(at, names, strict=True) if x is not None or not r[4]]
+        lines.append(f"| {c['v']:g} | {c['da0']:g} | {c['branch']} | {_mark(c)} | "
+                     + " | ".join("" if x is None and r[4] else _mark(x)
+                                  for x, r in zip(at, names, strict=True))
+                     + f" | {decided([x for x, _ in made])} |")
+    return lines + [""]
+
+
+def _mark(c: dict | None) -> str:
+    if c is None or c["label"] is None:
+        return "not made" + (f" ({c['failed'][:40]})" if c and c.get("failed") else "")
+    if not c["same"]:
+        return f"≠ {c['label']}"
+    mark = (f" ✕ m = {', '.join(map(str, c['modes_below']))}" if c["modes_below"]
+            else " ~" if c["marginal"] else "")
+    return f"{c['lowest']:.2g} (m = {c['lowest_m']}){mark}"
+
+
+def decided(at: list) -> str:
+    """What the first and the last of a cell's refined entries (in :data:`REFINED`'s order,
+    those made; None: failed) say — 4 nodes per ε at the plane's ε and at ε/2 where the
+    tie-break was made (2.5 per ε at ε/2 left out there: it disagreed), else ε/2 at 2.5 per
+    ε: "unstable, m = …" where both put a common mode below −MARGINAL (ε/R₀)⁴, "stable"
+    where neither has one nor is marginal, else "undecided"."""
+    at = [at[0], at[-1]]
+    if any(x is None or x["label"] is None or not x["same"] for x in at):
+        return "undecided (not made or relaxed)"
+    common = set.intersection(*(set(x["modes_below"]) for x in at))
+    if common:
+        return "unstable, m = " + ", ".join(map(str, sorted(common)))
+    if not any(x["modes_below"] or x["marginal"] for x in at):
+        return "stable"
+    return "undecided"
 
 
 def _cell_text(c: dict | None) -> str:
@@ -221,6 +310,9 @@ def main(argv=None) -> dict:
 
     ap = study_parser(__doc__, OUT, quick="two cells at ε = 0.04, m ≤ 3", workers="",
                       report_only="")
+    ap.add_argument("--refine", action="store_true",
+                    help="make the flagged cells (unstable or marginal; --quick: every cell) "
+                         "again at each of REFINED's meshes")
     args = ap.parse_args(argv)
     suffix = "_quick" if args.quick else ""
     if args.quick:
@@ -231,24 +323,57 @@ def main(argv=None) -> dict:
         todo = cells(json.loads(PLANE.read_text()))
         modes = MODES
     root = args.out / f"ade_azimuthal{suffix}"
+    inline = args.quick or args.workers <= 1  # (the quick cells: in this process)
     if not args.report_only:
-        jobs = [(c, root / cell_name(c), modes) for c in todo
-                if c["branch"] is not None and not (root / cell_name(c) / "branch.csv").is_file()]
-        inline = args.quick or args.workers <= 1  # (the quick cells: in this process)
-        with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
-            made = map(make_cell, jobs) if inline else pool.map(make_cell, jobs)
-            for (cell, folder, _), why in zip(jobs, made, strict=True):
-                if why:
-                    folder.mkdir(parents=True, exist_ok=True)
-                    (folder / "failed.txt").write_text(why + "\n")
-                print(f"  {cell_name(cell)} ({cell['branch']}): {why or 'done'}", flush=True)
+        make_all([(c, root / cell_name(c), modes, None) for c in todo], args.workers, inline)
     result = summarize(root, todo, modes)
+    if args.refine and not args.report_only or (root / "refined").is_dir():
+        result["refined"] = refine(root / "refined", result["cells"], modes, args,
+                                   make=args.refine and not args.report_only, inline=inline)
     args.out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(args.out / f"ade_azimuthal{suffix}.json", result)
+    write_json_atomic(args.out / f"ade_azimuthal{suffix}.json", result, indent=None)
     draw(args.out / f"ade_azimuthal{suffix}.png", result)
     write_report(args.out, result, suffix)
     print(f"wrote {args.out / f'ade_azimuthal{suffix}.md'}")
     return result
+
+
+def make_all(jobs: list, workers: int, inline: bool) -> None:
+    """:func:`make_cell` for each job whose folder holds no point yet (on ``workers``
+    processes, or in this one), a failure's reason in its folder's failed.txt."""
+    jobs = [j for j in jobs if j[0]["branch"] is not None
+            and not (j[1] / "branch.csv").is_file()]
+    with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+        made = map(make_cell, jobs) if inline else pool.map(make_cell, jobs)
+        for (cell, folder, _, per_eps), why in zip(jobs, made, strict=True):
+            if why:
+                folder.mkdir(parents=True, exist_ok=True)
+                (folder / "failed.txt").write_text(why + "\n")
+            mesh = "" if per_eps is None else f", ε = {cell['eps']:g}, {per_eps:g} per ε"
+            print(f"  {cell_name(cell)} ({cell['branch']}{mesh}): {why or 'done'}", flush=True)
+
+
+def refine(root: Path, made: list[dict], modes: int, args, make: bool, inline: bool) -> dict:
+    """{REFINED folder: its cells summarized}: each made cell of its own branch that is
+    unstable or marginal (``args.quick``: each made cell) at each of :data:`REFINED`'s
+    meshes in turn (made there when ``make``), a tie-break mesh only at the cells the meshes
+    before leave undecided."""
+    flagged = [c for c in made if c["label"] is not None and c["same"]
+               and (args.quick or c["modes_below"] or c["marginal"])]
+    keep = ("v", "da0", "branch", "sharp", "lowest_any", "R0")
+    out = {}
+    for name, factor, per_eps, _, tiebreak in REFINED:
+        todo = [{**{k: c[k] for k in keep}, "eps": round(c["eps"] * factor, 12),
+                 "nodes_per_eps": per_eps} for c in flagged]
+        if tiebreak:
+            todo = [c for c in todo if decided([next(x for x in before
+                                                     if cell_name(x) == cell_name(c))
+                                                for before in out.values()]) == "undecided"]
+        if make:
+            make_all([(c, root / name / cell_name(c), modes, per_eps) for c in todo],
+                     args.workers, inline)
+        out[name] = summarize(root / name, todo, modes)["cells"]
+    return out
 
 
 if __name__ == "__main__":

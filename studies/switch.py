@@ -85,7 +85,11 @@ def switch_case(root: Path, case: tuple) -> dict:
     if (run / "shape.png").is_file():  # the picture a reader looks at, beside the report
         import shutil
 
-        shutil.copy(run / "shape.png", root.parent / f"{root.name}-{name}.png")
+        from fem_ade.plots.figures import compact_png
+
+        picture = root.parent / f"{root.name}-{name}.png"
+        shutil.copy(run / "shape.png", picture)
+        compact_png(picture, 128)  # (in the repository: a palette, a third of the bytes)
     t0 = time.perf_counter()
     be, _ = load_state(run)
     steady = polish(be)

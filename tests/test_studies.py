@@ -392,12 +392,31 @@ def check_azimuthal(result, out):
 
 def check_ade_azimuthal(result, out):
     """Two cells at ε = 0.04 with m ≤ 3: each made at its (v, Δa₀) as its branch, its
-    lowest eigenvalue and its m in the report; the oblate at v = 0.9 is stable in 3D."""
+    lowest eigenvalue and its m in the report; the oblate at v = 0.9 is stable in 3D.
+    ``--refine`` (in --quick: every cell) made both again on a finer mesh at the same ε
+    (more nodes, a nearby eigenvalue: the same state) and at ε/2, each in the report."""
     oblate, prolate = result["cells"]
     assert oblate["same"] and prolate["same"] and oblate["unstable_3d"] == 0
     assert oblate["lowest_m"] in range(4) and prolate["lowest"] is not None
     text = (out / "ade_azimuthal_quick.md").read_text()
     assert "Of 2 cells: 2 made" in text and (out / "ade_azimuthal_quick.png").is_file()
+    finer, half = result["refined"]["nodes=4"], result["refined"]["half-eps"]
+    assert [c["eps"] for c in finer + half] == [0.04, 0.04, 0.02, 0.02], (finer, half)
+    root = out / "ade_azimuthal_quick"
+    n = {f: json.loads((root / f / "v=0.9_da0=0.8" / "branch.json").read_text())["n"]
+         for f in (".", "refined/nodes=4")}
+    assert n["refined/nodes=4"] > n["."], n
+    for coarse, fine in zip(result["cells"], finer, strict=True):
+        assert fine["same"] and fine["lowest_m"] == coarse["lowest_m"]
+        assert abs(fine["lowest"] - coarse["lowest"]) < 0.1 * abs(coarse["lowest"]) + 0.05
+        assert fine["lowest"] != coarse["lowest"]  # (another mesh, not the same folder)
+    assert all(c["same"] for c in half) and "## The flagged cells refined" in text
+    # the tie-break mesh (ε/2, 4 per ε) only where the two before leave the cell undecided
+    decide = _load(STUDIES / "ade_azimuthal.py").decided
+    decided = [decide([f, h]) for f, h in zip(finer, half, strict=True)]
+    tie = result["refined"]["half-eps-4"]
+    assert [cell["v"] for cell in tie] == [c["v"] for c, d in zip(finer, decided, strict=True)
+                                          if d == "undecided"], (decided, tie)
 
 
 def check_solver_bench(result, out):
@@ -484,7 +503,7 @@ def check_starfish(result, out):
     assert (out / "starfish_quick.md").is_file() and (out / "starfish_quick.png").is_file()
 
 
-ARGS = {"readme_figure": ["--steps", "2", "--n", "24"]}
+ARGS = {"readme_figure": ["--steps", "2", "--n", "24"], "ade_azimuthal": ["--quick", "--refine"]}
 #: where each study writes by default (under the current directory)
 DEFAULT_OUT = {"gallery": "runs/gallery", "readme_figure": "runs/readme"}
 

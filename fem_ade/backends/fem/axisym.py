@@ -129,14 +129,16 @@ def parse_domain(domain, L: float) -> tuple[float, float, float]:
     return R, z0, z1
 
 
-def default_cells(eps: float, L: float, order: int) -> int:
-    """Cells per L whose nodes are :data:`NODES_PER_EPS` per ε (at least 8)."""
-    return max(8, math.ceil(L * NODES_PER_EPS / (eps * order) - 1e-9))
+def default_cells(eps: float, L: float, order: int, per_eps: float = NODES_PER_EPS) -> int:
+    """Cells per L whose nodes are ``per_eps`` per ε (default :data:`NODES_PER_EPS`; at
+    least 8 cells)."""
+    return max(8, math.ceil(L * per_eps / (eps * order) - 1e-9))
 
 
-def default_nodes(eps: float, L: float, order: int) -> int:
-    """The default n: nodes per L at the finest spacing, p times :func:`default_cells`."""
-    return order * default_cells(eps, L, order)
+def default_nodes(eps: float, L: float, order: int, per_eps: float = NODES_PER_EPS) -> int:
+    """The default n (or that of ``per_eps`` nodes per ε): nodes per L at the finest
+    spacing, p times :func:`default_cells`."""
+    return order * default_cells(eps, L, order, per_eps)
 
 
 # ---------------------------------------------------------------------------------------------
