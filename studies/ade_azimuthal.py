@@ -216,16 +216,31 @@ def refined_report(result: dict) -> list[str]:
              "where neither has one nor is marginal.", "",
              "| v | Δa₀ | branch | plane's mesh | " + " | ".join(r[3] for r in names)
              + " | decided |", "|---|---|---|---|" + "---|" * len(names) + "---|"]
+    verdicts = decisions(result)
     for key, c in base.items():
         at = [next((x for x in refined[n] if cell_name(x) == key), None) for n, *_ in names]
-        if all(x is None for x in at):
+        if key not in verdicts:
             continue
-        made = [(x, r) for x, r in zip(at, names, strict=True) if x is not None or not r[4]]
         lines.append(f"| {c['v']:g} | {c['da0']:g} | {c['branch']} | {_mark(c)} | "
                      + " | ".join("" if x is None and r[4] else _mark(x)
                                   for x, r in zip(at, names, strict=True))
-                     + f" | {decided([x for x, _ in made])} |")
+                     + f" | {verdicts[key]} |")
     return lines + [""]
+
+
+def decisions(result: dict) -> dict:
+    """{cell name: what its refined meshes decide (:func:`decided`)} for each refined
+    cell."""
+    refined = result.get("refined") or {}
+    names = [r for r in REFINED if r[0] in refined]
+    out = {}
+    for c in result["cells"]:
+        key = cell_name(c)
+        at = [(next((x for x in refined[r[0]] if cell_name(x) == key), None), r)
+              for r in names]
+        if any(x is not None for x, _ in at):
+            out[key] = decided([x for x, r in at if x is not None or not r[4]])
+    return out
 
 
 def _mark(c: dict | None) -> str:
@@ -268,6 +283,10 @@ def _cell_text(c: dict | None) -> str:
     return f"{name}{mark}, {c['lowest']:.2g} (m = {c['lowest_m']})"
 
 
+#: the ring drawn round a refined cell, by what its meshes decide
+RINGS = {"unstable": "tab:red", "stable": "tab:green", "undecided": "0.45"}
+
+
 def draw(path: Path, result: dict) -> None:
     import matplotlib
 
@@ -279,6 +298,7 @@ def draw(path: Path, result: dict) -> None:
     colours = {"prolate": "tab:blue", "pear": "tab:purple", "oblate": "tab:orange",
                "stomatocyte": "tab:green"}
     fig, ax = plt.subplots(figsize=(8.4, 5.6))
+    verdicts = decisions(result)
     for c in result["cells"]:
         if c["branch"] is None:
             continue
@@ -294,8 +314,15 @@ def draw(path: Path, result: dict) -> None:
             ax.annotate("m=" + ",".join(map(str, c["modes_below"])), (c["da0"], c["v"]),
                         textcoords="offset points", xytext=(0, -16), ha="center",
                         fontsize=7)
+        verdict = verdicts.get(cell_name(c))
+        if verdict is not None:  # the refined meshes' verdict: a ring
+            ax.scatter([c["da0"]], [c["v"]], s=520, facecolors="none", linewidths=1.6,
+                       edgecolors=RINGS[verdict.split(",")[0].split(" (")[0]])
     for name, colour in colours.items():
         ax.scatter([], [], s=80, color=colour, label=name)
+    for verdict, colour in RINGS.items() if verdicts else ():
+        ax.scatter([], [], s=80, facecolors="none", edgecolors=colour,
+                   label=f"refined: {verdict}")
     ax.set(xlabel="Δa₀", ylabel="v", title="genus-0 lowest (phase field, ε = 0.01): "
            "✕ unstable, ~ marginal, ≠ relaxed")
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
