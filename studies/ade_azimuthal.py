@@ -218,26 +218,30 @@ def refined_report(result: dict) -> list[str]:
              + " | decided |", "|---|---|---|---|" + "---|" * len(names) + "---|"]
     verdicts = decisions(result)
     for key, c in base.items():
-        at = [next((x for x in refined[n] if cell_name(x) == key), None) for n, *_ in names]
         if key not in verdicts:
             continue
         lines.append(f"| {c['v']:g} | {c['da0']:g} | {c['branch']} | {_mark(c)} | "
                      + " | ".join("" if x is None and r[4] else _mark(x)
-                                  for x, r in zip(at, names, strict=True))
+                                  for x, r in refined_at(refined, key))
                      + f" | {verdicts[key]} |")
     return lines + [""]
+
+
+def refined_at(refined: dict, key: str) -> list[tuple]:
+    """[(the cell ``key``'s entry at a refined mesh, or None; that mesh's :data:`REFINED`
+    row)] for each mesh in ``refined``, in REFINED's order."""
+    return [(next((x for x in refined[r[0]] if cell_name(x) == key), None), r)
+            for r in REFINED if r[0] in refined]
 
 
 def decisions(result: dict) -> dict:
     """{cell name: what its refined meshes decide (:func:`decided`)} for each refined
     cell."""
     refined = result.get("refined") or {}
-    names = [r for r in REFINED if r[0] in refined]
     out = {}
     for c in result["cells"]:
         key = cell_name(c)
-        at = [(next((x for x in refined[r[0]] if cell_name(x) == key), None), r)
-              for r in names]
+        at = refined_at(refined, key)
         if any(x is not None for x, _ in at):
             out[key] = decided([x for x, r in at if x is not None or not r[4]])
     return out
@@ -248,9 +252,13 @@ def _mark(c: dict | None) -> str:
         return "not made" + (f" ({c['failed'][:40]})" if c and c.get("failed") else "")
     if not c["same"]:
         return f"≠ {c['label']}"
-    mark = (f" ✕ m = {', '.join(map(str, c['modes_below']))}" if c["modes_below"]
+    return f"{c['lowest']:.2g} (m = {c['lowest_m']}){_flag(c)}"
+
+
+def _flag(c: dict) -> str:
+    """A made cell's mark: ✕ with the modes below −MARGINAL (ε/R₀)⁴, ~ marginal, or none."""
+    return (f" ✕ m = {', '.join(map(str, c['modes_below']))}" if c["modes_below"]
             else " ~" if c["marginal"] else "")
-    return f"{c['lowest']:.2g} (m = {c['lowest_m']}){mark}"
 
 
 def decided(at: list) -> str:
@@ -278,9 +286,7 @@ def _cell_text(c: dict | None) -> str:
         return f"{name}: not made" + (f" ({c['failed'][:40]})" if c.get("failed") else "")
     if not c["same"]:
         return f"{name} ≠ {c['label']}"
-    mark = (f" ✕ m = {', '.join(map(str, c['modes_below']))}" if c["modes_below"]
-            else " ~" if c["marginal"] else "")
-    return f"{name}{mark}, {c['lowest']:.2g} (m = {c['lowest_m']})"
+    return f"{name}{_flag(c)}, {c['lowest']:.2g} (m = {c['lowest_m']})"
 
 
 #: the ring drawn round a refined cell, by what its meshes decide
@@ -393,9 +399,8 @@ def refine(root: Path, made: list[dict], modes: int, args, make: bool, inline: b
         todo = [{**{k: c[k] for k in keep}, "eps": round(c["eps"] * factor, 12),
                  "nodes_per_eps": per_eps} for c in flagged]
         if tiebreak:
-            todo = [c for c in todo if decided([next(x for x in before
-                                                     if cell_name(x) == cell_name(c))
-                                                for before in out.values()]) == "undecided"]
+            todo = [c for c in todo if decided([x for x, _ in refined_at(out, cell_name(c))])
+                    == "undecided"]
         if make:
             make_all([(c, root / name / cell_name(c), modes, per_eps) for c in todo],
                      args.workers, inline)
