@@ -111,6 +111,13 @@ def line_point(key: dict) -> dict:
     spec = {"name": line_name(key["v"], key["line"]), "seed": key["branch"],
             "branch": branch, "base": "vesicle",
             "scene": {"v": key["v"], "kbar": KBAR, "eps": key["eps"], "R0": key["R0"]}}
+    if key.get("nodes_per_eps"):  # else the default 2.5 nodes per ε
+        from fem_ade.backends.fem.axisym import DEFAULT_ORDER, default_nodes
+        from fem_ade.scenes.catalogue import vesicle_scene
+
+        L = vesicle_scene(sharp_seed=False, **spec["scene"], da0=key["from"],
+                          branch=key["branch"]).params.L
+        spec["run"] = {"n": default_nodes(key["eps"], L, DEFAULT_ORDER, key["nodes_per_eps"])}
     if key["branch"] == "pear":
         from fem_ade.scenes.catalogue import scene_to_mapping
         from fem_ade.scenes.pear import pear_scene
@@ -168,13 +175,24 @@ def archive_line(folder: Path, key: dict) -> dict:
         record = json.loads(failure_record(folder).read_text()) if failed else {}
         return {"key": key, "rows": [], "seconds": record.get("seconds"),
                 "missing": reason.removeprefix("ModelError: ")}
-    rows = [_plain(r) for r in read_branch_table(folder)]
-    return {"key": key, "rows": rows, "missing": None, "seconds": summary.get("seconds")}
+    modes = key.get("modes", 0)
+    rows = [_plain(r, modes) for r in read_branch_table(folder)]
+    out = {"key": key, "rows": rows, "missing": None, "seconds": summary.get("seconds")}
+    forks = folder / "bifurcations.json"
+    if modes and forks.is_file():
+        out["bifurcations"] = json.loads(forks.read_text())["bifurcations"]
+    return out
 
 
-def _plain(row: dict) -> dict:
+def _plain(row: dict, modes: int = 0) -> dict:
+    """A row's columns the reports read (with ``modes``: what tells the branch — e, the
+    surface's da, the label, the fold — and each mode's lowest eigenvalue, the 3D unstable
+    count and the seconds: ``studies/ade_bifurcations.py`` reads no more)."""
     keep = ("da0", "e", "E", "W", "G", "v_surface", "da_surface", "label", "unstable",
             "lowest_eigenvalue", "fold", "newton", "seconds")
+    if modes:
+        keep = ("da0", "e", "da_surface", "label", "fold", "seconds",
+                *(f"lowest_m{m}" for m in range(modes + 1)), "unstable_3d")
     return {k: row.get(k) for k in keep}
 
 
@@ -264,11 +282,11 @@ def archived_sizes(base: Path, v_list) -> dict:
 
 
 def plane_lines(sharp: dict, R0: dict, v_list, branches, eps: float, step: float,
-                quick: bool) -> tuple[dict, list[dict]]:
+                quick: bool, **more) -> tuple[dict, list[dict]]:
     """The plane's lines: {(v, branch): [(name, span), …]} (:func:`line_spans`) and their
-    keys (:func:`line_key`), in that order."""
+    keys (:func:`line_key`, with ``more``), in that order."""
     spans = {(v, b): line_spans(b, sharp[v].get(b, []), quick) for v in v_list for b in branches}
-    keys = [line_key(v, b, name, span, R0[v], eps, step)
+    keys = [line_key(v, b, name, span, R0[v], eps, step, **more)
             for (v, b), lines in spans.items() for name, span in lines]
     return spans, keys
 
