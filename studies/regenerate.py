@@ -40,6 +40,7 @@ STEPS = (
     ("branches", ["studies/branches.py", "--out", RESULTS]),
     ("ade_branches", ["studies/ade_branches.py", "--out", RESULTS]),
     ("ade_limit", ["studies/ade_limit.py", "--out", RESULTS]),
+    ("ade_bifurcations", ["studies/ade_bifurcations.py", "--out", RESULTS]),
     ("azimuthal", ["studies/azimuthal.py", "--out", RESULTS]),
     ("ade_azimuthal", ["studies/ade_azimuthal.py", "--out", RESULTS]),
     ("solver_bench", ["studies/solver_bench.py", "--out", RESULTS]),
@@ -70,6 +71,9 @@ SWEEPS = {"gallery": ("built from its plan: studies/gallery.py point_spec, kick_
           "ade_branches": ("built from its lines: studies/_lib/lines.py line_point",),
           "ade_limit": ("built from its spans: studies/ade_limit.py region_keys and cell_keys, "
                         "studies/_lib/lines.py line_point",),
+          "ade_bifurcations": ("built from its lines and their ends' windows: "
+                               "studies/ade_bifurcations.py coarse_keys and fine_keys, "
+                               "studies/_lib/lines.py line_point",),
           "azimuthal": ("built from its branches: studies/azimuthal.py plan",),
           "constraints_study": ("built from its Δt trials: studies/constraints_study.py "
                                 "case_point",)}
