@@ -44,7 +44,6 @@ from _lib.cli import one_thread, study_parser
 
 one_thread()
 
-import json  # noqa: E402
 import math  # noqa: E402
 from pathlib import Path  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
@@ -62,7 +61,8 @@ FINE_STEP = 0.015
 #: the windows run in groups of this many lines per worker, each group archived as it ends
 #: (a run stopped between groups keeps what it made); the m ≥ 1 ends first
 GROUP = 2
-#: the order in ε assumed where two ε are known
+#: the order in ε assumed where two ε are known (``_lib.fits.extrapolate``'s, where no order is
+#: observed)
 ORDER = 2
 FULL = SimpleNamespace(eps=adl.EPS, v=adl.V, step=adl.STEP, quick=False, fine=(0.005,),
                        window=WINDOW, fine_step=FINE_STEP, branches=BRANCHES)
@@ -78,36 +78,29 @@ def eps_base(out: Path, eps: float, quick: bool) -> Path:
     return out / ("ade_bifurcations_quick" if quick else "ade_bifurcations") / f"eps={eps:g}"
 
 
-def load(base: Path) -> dict:
-    path = base / "lines.json"
-    return json.loads(path.read_text()) if path.is_file() else {}
-
-
 # ---------------------------------------------------------------------------------------------
 # crossings
 # ---------------------------------------------------------------------------------------------
-def mode_curve(rows: list[dict], m: int):
-    """Mode m's lowest eigenvalue along the points (:func:`_lib.lines.curve`), None where
-    fewer than two have it."""
-    have = [r for r in rows if r.get(f"lowest_m{m}") not in (None, "")]
-    return adl.curve([{"da0": r["da0"], "x": float(r[f"lowest_m{m}"])} for r in have],
-                     value="x")
+def mode_lows(row: dict, modes: int = MODES) -> dict[int, float]:
+    """{m: the point's lowest eigenvalue in mode m}, for the modes it has."""
+    return {m: float(row[f"lowest_m{m}"]) for m in range(modes + 1)
+            if row.get(f"lowest_m{m}") not in (None, "")}
 
 
 def crossings(rows: list[dict], modes: int) -> list[dict]:
     """Each sign change of a mode's lowest eigenvalue along the points (sorted in Δa₀): the
-    root of its :func:`mode_curve` between the two points (Brent), ``turns`` 'unstable' or
-    'stable' as Δa₀ grows; sorted in Δa₀."""
+    root of a cubic spline of it through the points (:func:`_lib.lines.curve`) between the
+    two (Brent), ``turns`` 'unstable' or 'stable' as Δa₀ grows; sorted in Δa₀."""
     from scipy.optimize import brentq
 
     rows = sorted(rows, key=lambda r: r["da0"])
+    lows = [(r["da0"], mode_lows(r, modes)) for r in rows]
     out = []
     for m in range(modes + 1):
-        c = mode_curve(rows, m)
+        pts = [(x, low[m]) for x, low in lows if m in low]
+        c = adl.curve([{"da0": x, "y": y} for x, y in pts], value="y")
         if c is None:
             continue
-        pts = [(r["da0"], float(r[f"lowest_m{m}"])) for r in rows
-               if r.get(f"lowest_m{m}") not in (None, "")]
         for (xa, ya), (xb, yb) in zip(pts, pts[1:], strict=False):
             if ya == 0.0 or ya * yb >= 0:
                 continue
@@ -118,16 +111,15 @@ def crossings(rows: list[dict], modes: int) -> list[dict]:
     return sorted(out, key=lambda c: c["da0"])
 
 
-def stable_parts(rows: list[dict], modes: int) -> list[dict]:
+def stable_parts(rows: list[dict], cross: list[dict], modes: int) -> list[dict]:
     """The branch's 3D-stable parts: maximal runs of points with every mode's lowest
-    eigenvalue positive, each with its ends — the crossing that opens it (None: it starts at
-    the line's first point) and the one that closes it (None: to the line's last)."""
+    eigenvalue positive, each with its ends among its :func:`crossings` ``cross`` — the
+    one that opens it (None: it starts at the line's first point) and the one that closes
+    it (None: to the line's last)."""
     rows = sorted(rows, key=lambda r: r["da0"])
-    cross = crossings(rows, modes)
     parts, run = [], []
     for r in rows + [None]:
-        ok = r is not None and all(float(r[f"lowest_m{m}"]) > 0 for m in range(modes + 1)
-                                   if r.get(f"lowest_m{m}") not in (None, ""))
+        ok = r is not None and all(x > 0 for x in mode_lows(r, modes).values())
         if ok:
             run.append(r)
             continue
@@ -283,29 +275,20 @@ def transitions(coarse: dict, windows: dict, cfg) -> list[dict]:
 
 
 def extrapolate(xs: dict) -> dict:
-    """{eps: x} → x₀ with p = ORDER assumed from the two smallest ε, and with three ε the
-    fitted order and its x₀ too."""
+    """{eps: x} → x₀ by :func:`_lib.fits.extrapolate`: with p = ORDER assumed over the two
+    smallest ε, and with three ε the observed order and its x₀ too."""
+    from _lib.fits import extrapolate as richardson
+
     pts = sorted((e, x) for e, x in xs.items() if x is not None)
     out = {"x0_assumed": None, "order": None, "x0_fitted": None}
     if len(pts) < 2:
         return out
-    (e1, x1), (e2, x2) = pts[0], pts[1]
-    r = e2 / e1
-    out["x0_assumed"] = x1 + (x1 - x2) / (r ** ORDER - 1)
+    eps, x = zip(*pts, strict=True)
+    out["x0_assumed"] = richardson(list(eps[:2]), list(x[:2]))[0]
     if len(pts) >= 3:
-        from scipy.optimize import brentq
-
-        (e3, x3) = pts[2]
-        d1, d2 = x2 - x1, x3 - x2
-        if d1 != 0 and d2 / d1 > 0:
-            def g(p):
-                return (e3 ** p - e2 ** p) / (e2 ** p - e1 ** p) - d2 / d1
-            try:
-                p = brentq(g, 0.2, 6.0)
-                c = d1 / (e2 ** p - e1 ** p)
-                out.update(order=p, x0_fitted=x1 - c * e1 ** p)
-            except ValueError:
-                pass
+        x0, p, observed = richardson(list(eps), list(x))
+        if observed:
+            out.update(order=p, x0_fitted=x0)
     return out
 
 
@@ -344,8 +327,7 @@ def summary(cfg, coarse: dict, windows: dict, R0: dict) -> dict:
 
 
 def _lows(row: dict, scale: float) -> dict:
-    return {str(m): round(float(row[f"lowest_m{m}"]) / scale, 3) for m in range(MODES + 1)
-            if row.get(f"lowest_m{m}") not in (None, "")}
+    return {str(m): round(x / scale, 3) for m, x in mode_lows(row).items()}
 
 
 def _f(x, digits=4) -> str:
@@ -477,10 +459,9 @@ def write_figure(out: Path, result: dict, coarse: dict, suffix: str = "") -> Non
             if bb != b:
                 continue
             for r in e["rows"]:
-                lows = [float(r[f"lowest_m{m}"]) for m in range(MODES + 1)
-                        if r.get(f"lowest_m{m}") not in (None, "")]
-                colour = "tab:green" if min(lows) > 0 else (
-                    "tab:orange" if lows[0] < 0 else "tab:red")
+                lows = mode_lows(r)
+                colour = "tab:green" if min(lows.values()) > 0 else (
+                    "tab:orange" if lows.get(0, 0.0) < 0 else "tab:red")
                 ax.plot(r["da0"], v, "o", ms=4, color=colour)
             for c in e["crossings"]:
                 ax.plot([c["da0"]] * 2, [v - 0.012, v + 0.012], "-", color="0.3", lw=0.8)
@@ -525,28 +506,23 @@ def main(argv=None) -> dict:
     fine = cfg.fine if args.fine is None else tuple(args.fine)
     plane = args.out / ("ade_branches_quick" if cfg.quick else "ade_branches")
     if cfg.quick and not args.report_only and not (plane / "R0.json").is_file():
-        import subprocess
-        import sys
-
-        subprocess.run([sys.executable, str(Path(__file__).with_name("ade_branches.py")),
-                        "--quick", "--out", str(args.out), "--workers", str(args.workers)],
-                       check=True)
+        adl.run_quick_plane(args.out, args.workers)
     sharp = adl.archived_sharp(plane, cfg.v, BRANCHES if not cfg.quick else cfg.branches)
     R0 = adl.archived_sizes(plane, cfg.v)
     keys = coarse_keys(cfg, sharp, R0)
     base = eps_base(args.out, cfg.eps, cfg.quick)
-    archive = load(base)
+    archive = adl.load_archive(base)
     if not args.report_only:
         adl.run_lines(base, keys, archive, args.workers)
     coarse = line_results(keys, archive, sharp)
     for e in coarse.values():
-        e["parts"] = stable_parts(e["rows"], MODES)
         e["crossings"] = crossings(e["rows"], MODES)
+        e["parts"] = stable_parts(e["rows"], e["crossings"], MODES)
     windows = {}
     for eps in fine:
         fkeys = fine_keys(coarse, R0, eps, cfg)
         fbase = eps_base(args.out, eps, cfg.quick)
-        farchive = load(fbase)
+        farchive = adl.load_archive(fbase)
         if not args.report_only:
             todo = sorted(fkeys, key=lambda k: (k["end"]["m"] == 0, k["v"], k["end"]["da0"]))
             size = GROUP * args.workers

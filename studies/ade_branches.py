@@ -64,6 +64,7 @@ from _lib.lines import (  # noqa: E402
     curve,
     kept,
     kept_lines,
+    load_archive,
     plane_lines,
     run_lines,
 )
@@ -214,8 +215,7 @@ def main(argv=None) -> dict:
         sharp = sharp_lines(base, v_list, branches, grid, args.workers)
         R0 = line_sizes(base, v_list, eps, branches)
     spans, keys = plane_lines(sharp, R0, v_list, branches, eps, step, q)
-    path = base / "lines.json"
-    archive = json.loads(path.read_text()) if path.is_file() else {}
+    archive = load_archive(base)
     if not args.report_only:
         run_lines(base, keys, archive, args.workers)
     pf = gathered(spans, keys, archive, R0)

@@ -240,12 +240,7 @@ def main(argv=None) -> dict:
     cfg, suffix = (QUICK, "_quick") if args.quick else (FULL, "")
     co = cfg.coarse
     if args.quick and not args.report_only:  # the plane's quick line first, by its study
-        import subprocess
-        import sys
-
-        subprocess.run([sys.executable, str(Path(__file__).with_name("ade_branches.py")),
-                        "--quick", "--out", str(args.out), "--workers", str(args.workers)],
-                       check=True, stdout=subprocess.DEVNULL)
+        adl.run_quick_plane(args.out, args.workers)
     base01, base = args.out / f"ade_branches{suffix}", args.out / f"ade_limit{suffix}"
     coarse = json.loads((args.out / f"ade_branches{suffix}.json").read_text())
     sharp = adl.archived_sharp(base01, co.v, co.branches)
@@ -260,8 +255,7 @@ def main(argv=None) -> dict:
     keys = [k for reg in regs for k in region_keys(reg, R0[reg["v"]], cfg)]
     keys += [k for reg in regs
              for k in cell_keys(reg, R0[reg["v"]], grid_of(coarse, reg["v"]), cfg).values()]
-    archive_path = base / "lines.json"
-    archive = json.loads(archive_path.read_text()) if archive_path.is_file() else {}
+    archive = adl.load_archive(base)
     if not args.report_only:
         adl.run_lines(base, keys, archive, args.workers)
     _, keys01 = adl.plane_lines(sharp, R0, co.v, co.branches, co.eps, co.step, co.quick)

@@ -134,6 +134,23 @@ def archived(archive: dict, key: dict) -> dict | None:
     return got if got is not None and got["key"] == key else None
 
 
+def load_archive(base: Path) -> dict:
+    """The lines archived in ``base/lines.json`` ({} where none are)."""
+    path = base / "lines.json"
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def run_quick_plane(out: Path, workers: int) -> None:
+    """``ade_branches.py --quick`` into ``out`` (its line, R₀ and sharp cache: what a study's
+    quick mode builds on), quietly, as its own process."""
+    import subprocess
+    import sys
+
+    script = Path(__file__).resolve().parents[1] / "ade_branches.py"
+    subprocess.run([sys.executable, str(script), "--quick", "--out", str(out),
+                    "--workers", str(workers)], check=True, stdout=subprocess.DEVNULL)
+
+
 def run_lines(base: Path, keys: list[dict], archive: dict, workers: int) -> None:
     """Follow the lines not in ``archive`` (or archived with another key) as one branch
     sweep in ``base/sweep`` (:mod:`fem_ade.campaigns.sweep`: a Dask task per line, resumable, a
