@@ -60,7 +60,7 @@ FEM_ORDERS = tuple(range(1, 17))
 LINALGS = ("numpy", "petsc")
 #: the FEM's geometries: the periodic box in 3D (2D), or a surface of revolution on its
 #: meridional half-plane (r, z) (docs/model.md §11)
-GEOMETRIES = ("cartesian", "axisymmetric")
+GEOMETRIES = ("cartesian", "axisymmetric", "octant")
 
 
 @dataclass(frozen=True)
@@ -138,13 +138,16 @@ BACKENDS = {
                    "cartesian (default: the periodic box) or axisymmetric: a shape that is a "
                    "surface of revolution about a vertical axis, on its meridional half-plane "
                    "(r, z) with the measure 2 pi r dr dz (docs/model.md §11; by default order 8, "
-                   "a mesh graded to the membrane and --n from eps: 2.5 nodes per eps)"),
+                   "a mesh graded to the membrane and --n from eps: 2.5 nodes per eps); or "
+                   "octant: a 3D state with the mirror planes x, y, z = L/2, on one eighth "
+                   "of the box (docs/model.md §13)"),
             Option("domain", str, None, None,
                    "axisymmetric: the half-plane R,z0,z1 (r <= R, z0 <= z <= z1; default "
                    "L/sqrt(pi),0,L: the box's volume and height)"),
         ),
         variants=((("geometry", "axisymmetric"),
                    "fem_ade.backends.fem.axisym:AxisymmetricFEMBackend"),
+                  (("geometry", "octant"), "fem_ade.backends.fem.octant:OctantFEMBackend"),
                   (("linalg", "petsc"), "fem_ade.backends.fem.petsc:PETScFEMBackend")),
     ),
     "spectral": BackendSpec(

@@ -47,6 +47,7 @@ STEPS = (
     ("switch", ["studies/switch.py", "--out", RESULTS]),
     ("branch3d", ["studies/branch3d.py", "--out", RESULTS]),
     ("starfish", ["studies/starfish.py", "--out", RESULTS]),
+    ("ade_octant", ["studies/ade_octant.py", "--out", RESULTS]),
     ("newton3d_bench", ["studies/newton3d_bench.py", "--out", RESULTS]),
     ("nonaxisymmetric", ["studies/nonaxisymmetric.py", "--out", RESULTS, "--eps", "0.02"]),
     ("sweep_scaling", ["studies/sweep_scaling.py", "--out", RESULTS]),
@@ -99,6 +100,9 @@ MEASUREMENTS = {"convergence": "errors and times of each resolution, in one proc
                             "in one process",
                 "newton3d_bench": "one 3D steady state by Newton with and without its pins, "
                                   "CPU seconds in one process",
+                "ade_octant": "each state's (r, z) point, then its two 3D octant runs in a "
+                              "process pool (runs from switched starts, with their CPU "
+                              "seconds)",
                 "ade_azimuthal": "one point per cell of the ADE plane and its modes, in a "
                                  "process pool (a one-point branch: a sweep's [branch] has "
                                  "no max_points)"}

@@ -492,6 +492,20 @@ def check_switch(result, out):
     assert (out / "switch_quick.md").is_file() and (out / "switch_quick-eps=0.04.png").is_file()
 
 
+def check_ade_octant(result, out):
+    """At ε = 0.04: the oblate past its m = 2 bifurcation, revolved onto the octant, stays an
+    axisymmetric oblate within 2e-4 of its (r, z) e (the control); kicked along cos 2θ it
+    leaves it for an elongated body of lower e (measured: a gourd, e 0.063 below)."""
+    (c,) = result["cases"]
+    control, kicked = c["control"], c["kicked"]
+    assert c["rz"]["lowest"][2] < 0 and control["status"] == kicked["status"] == "steady"
+    assert abs(control["e"] / c["rz"]["e"] - 1) < 2e-4
+    assert control["semi_axes"][0] < 1.2 * control["semi_axes"][1]  # still round in x, y
+    assert kicked["e"] < control["e"] - 0.01
+    assert kicked["semi_axes"][0] > 2 * kicked["semi_axes"][1]  # elongated
+    assert (out / "ade_octant_quick.md").is_file() and (out / "ade_octant_quick.png").is_file()
+
+
 def check_branch3d(result, out):
     """At ε = 0.04 on 32³ nodes of order 8: three points of the oblate's m = 2 branch in 3D,
     the first two at the mode's amplitudes 0.1 and 0.2, each triaxial (three different

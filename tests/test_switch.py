@@ -113,6 +113,10 @@ def test_a_switch_is_an_ordinary_run_folder(oblate, tmp_path, capsys):
     (["--step", "0.2"], "go with --follow"),
     (["--follow", "2", "--mode", "2"], "a mode m >= 1 is taken at a point"),
     (["--follow", "2", "--n", "32", "--order", "4"], "no first point at v = "),
+    # the octant's
+    (["--geometry", "octant", "--mode", "3", "--point", "0"], "for even m only"),
+    (["--geometry", "octant", "--backend", "spectral"], "the octant geometry is the FEM's"),
+    (["--follow", "2", "--geometry", "octant"], "are the flow's"),
 ])
 def test_refusals_are_one_line(oblate, tmp_path, capsys, args, message):
     out = tmp_path / "never"
@@ -120,6 +124,39 @@ def test_refusals_are_one_line(oblate, tmp_path, capsys, args, message):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err, err
     assert not out.exists()
+
+
+def test_an_octant_switch_is_an_ordinary_run_folder(oblate, tmp_path, capsys):
+    """--geometry octant: the 3D run on the mirror-symmetric eighth of the box (order 8 by
+    default), started along cos 2θ (the phase the mirrors keep), a run folder that resumes;
+    its grid is the whole box's, unfolded."""
+    from fem_ade.cli.run import main as run_main
+
+    out = tmp_path / "octant"
+    assert switch_main([str(oblate), "--out", str(out), "--geometry", "octant", "--n", "32",
+                        "--max-steps", "20", "--checkpoint-every", "10", "--quiet"]) == 0
+    run = json.loads((out / "run.json").read_text())
+    assert run["backend_options"] == {"order": 8, "geometry": "octant"}
+    origin = json.loads(run["scene"]["description"].split(": ", 1)[1])
+    assert origin["geometry"] == "octant" and origin["m"] == 2
+    with np.load(out / "initial.npz") as z:
+        assert float(z["azimuthal_phase"]) == 0.0
+    assert run_main(["--resume", str(out), "--steps", "30", "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["steps"] == 30 and summary["backend_info"]["n_dofs"] == 17**3
+
+
+def test_the_mirror_error_sees_a_body_off_centre():
+    """mirror_error: 0 for a ball at the box's centre on the grid x_j = jL/m, the shift's
+    jump for one moved by a node."""
+    from fem_ade.campaigns.switch import mirror_error
+
+    m = 32
+    x = (np.arange(m) - m / 2) / m
+    X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
+    ball = np.tanh((0.25 - np.sqrt(X**2 + Y**2 + Z**2)) / 0.03)
+    assert mirror_error(ball) < 1e-12
+    assert mirror_error(np.roll(ball, 1, axis=2)) > 0.5
 
 
 def test_a_branch_without_its_points_is_refused(oblate, tmp_path, capsys):

@@ -28,14 +28,20 @@ def _parser() -> argparse.ArgumentParser:
                     help="switch from this point of the branch (its block m unstable) "
                          "instead of the bifurcation's nearest")
     ap.add_argument("--delta", type=float, default=DELTA,
-                    help=f"the start's max |delta psi| (default {DELTA})")
+                    help=f"the start's max |delta psi| (default {DELTA}; 0: the revolved "
+                         "state alone, a control)")
     ap.add_argument("--n", type=int, default=None,
                     help=f"nodes per axis (default {NODES_PER_EPS} L/eps, with --follow "
-                         "2.56 L/eps, up to the order)")
+                         "2.56 L/eps, with --geometry octant 1.92 L/eps; up to the order)")
     ap.add_argument("--order", type=int, default=None,
                     help=f"FEM element order (default {RUN_ORDERS['tensor']}, with --follow "
-                         "8)")
+                         "or --geometry octant 8)")
     ap.add_argument("--backend", choices=("fem", "spectral"), default="fem")
+    ap.add_argument("--geometry", choices=("cartesian", "octant"), default="cartesian",
+                    help="cartesian (default: the periodic box) or octant: the flow on one "
+                         "eighth of the box with the mirrors x, y, z = L/2 (even m and a "
+                         "state with an equatorial mirror; default order 8, 1.92 L/eps "
+                         "nodes)")
     ap.add_argument("--max-steps", type=int, default=None,
                     help="at most this many steps (default: the steady recipe's)")
     ap.add_argument("--checkpoint-every", type=int, default=200,
@@ -64,8 +70,8 @@ def main(argv=None) -> int:
         return 2
     try:
         result, origin = switch(args.branch, args.bifurcation, args.out, delta=args.delta,
-                                n=args.n, order=args.order or RUN_ORDERS["tensor"],
-                                backend=args.backend,
+                                n=args.n, order=args.order, backend=args.backend,
+                                geometry=args.geometry,
                                 max_steps=args.max_steps, point=args.point,
                                 checkpoint_every=args.checkpoint_every, mode=args.mode,
                                 quiet=args.quiet)
@@ -88,8 +94,10 @@ def _follow(args) -> int:
     """``--follow``: :func:`fem_ade.campaigns.switch_branch.follow_switched`."""
     from fem_ade.campaigns.switch_branch import ORDER, STEP, follow_switched
 
-    if args.delta != DELTA or args.backend != "fem" or args.max_steps is not None:
-        print("fem_ade.switch: error: --delta, --backend and --max-steps are the flow's; "
+    if args.delta != DELTA or args.backend != "fem" or args.max_steps is not None or \
+            args.geometry != "cartesian":
+        print("fem_ade.switch: error: --delta, --backend, --geometry and --max-steps are the "
+              "flow's; "
               "--follow continues the branch on the FEM", file=sys.stderr)
         return 2
     order = ORDER if args.order is None else args.order

@@ -184,12 +184,12 @@ class NewtonSystem:
         modes.p_orthogonal`), so that no Newton correction moves or turns the shape. The
         continuous problem has them as zero modes; the cubic mesh pins them with a small
         energy of either sign, which left Newton (and a continuation's tangent) to drift
-        along them. None in 2D."""
+        along them. None in 2D, and none in the octant (no rigid motion keeps its mirrors)."""
         if getattr(self.be, "geometry", "cartesian") == "axisymmetric":
             z = self.space.doflocs[1]
             return [self.w * (z - float(np.sum(self.w * z) / np.sum(self.w)))]
-        if self.space.dim != 3:
-            return []
+        if self.space.dim != 3 or getattr(self.be, "geometry", "") == "octant":
+            return []  # the octant's mirrors hold no rigid motion
         from fem_ade.backends.fem.modes import p_orthogonal, rigid_motions
 
         return p_orthogonal(self.P, rigid_motions(self.be, self.be.phi))
