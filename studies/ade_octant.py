@@ -8,9 +8,10 @@ revolved state alone (the control).
 the sharp one's is the oblate or the stomatocyte, which at ε = 0.01 do not hold): (v, Δa₀) =
 (0.6, 1.04), (0.6, 1.16), (0.65, 0.8), (0.65, 0.92), (0.65, 1.04). ``ade_bifurcations.md``
 found at v = 0.7 an interval where neither the oblate nor the prolate is stable in 3D
-(Δa₀ = 1.0861 … 1.0957 at ε = 0.01): both at its middle, 1.091. The stomatocyte at (0.6, 0.8),
-also unstable in m = 2, has no equatorial mirror: the octant cannot hold it (refused, said in
-the report).
+(Δa₀ = 1.0861 … 1.0957 at ε = 0.01). Run: three of the five cells (:data:`CASES`); the
+other two and the v = 0.7 interval's two states are listed as not run, with why
+(:data:`NOT_RUN`). The stomatocyte at (0.6, 0.8), also unstable in m = 2, has no equatorial
+mirror: the octant cannot hold it.
 
 **How.** Each state is made at its (v, Δa₀) and R₀ of the plane's lines by Newton on the
 (r, z) mesh (4 nodes per ε, modes m ≤ 4); then two 3D runs on the octant (order 8, 1.92 nodes
@@ -29,7 +30,7 @@ Writes ``OUT/ade_octant.md`` (with the hand-written ``OUT/ade_octant_notes.md``)
 and ``OUT/ade_octant.png`` (each case's end); the (r, z) points and 3D run folders in
 ``OUT/ade_octant/`` (not committed). Resumable: a finished run is read back.
 
-    python studies/ade_octant.py --out studies/results   # ~1 h on 2 cores
+    python studies/ade_octant.py --out studies/results   # ~45 min on 2 cores
     python studies/ade_octant.py --quick                 # ε = 0.04, an oblate, ~1 min
 """
 
@@ -194,11 +195,14 @@ def verdict(row: dict) -> str:
     axisymmetric = (k["group"] or "").startswith("D∞") or (k["group"] or "").startswith("C∞")
     what = ("ends axisymmetric" if axisymmetric else f"ends non-axisymmetric ({k['group']})")
     what += f", e {base - k['e']:.3g} below {which}"
-    plane = {b: e for b, e in (row.get("plane") or {}).items() if b != "torus"}
-    if plane:
-        best = min(plane, key=plane.get)
-        what += (f"; {'below' if k['e'] < plane[best] else 'above'} the lines' lowest genus-0 "
-                 f"({best}, {plane[best]:.4f})")
+    plane = row.get("plane") or {}
+    if k["label"] in plane:  # the end is a branch of the (r, z) lines at this cell
+        what += (f"; the lines' {k['label']} there: e {plane[k['label']]:.4f} "
+                 f"({k['e'] - plane[k['label']]:+.4f})")
+    elif (genus0 := {b: e for b, e in plane.items() if b != "torus"}):
+        best = min(genus0, key=genus0.get)
+        what += (f"; {'below' if k['e'] < genus0[best] else 'above'} the lines' lowest "
+                 f"genus-0 ({best}, {genus0[best]:.4f})")
     return what
 
 
@@ -247,7 +251,7 @@ def report(result: dict, out: Path, suffix: str) -> None:
 
 
 def draw(result: dict, root: Path, path: Path) -> None:
-    """Each case's kicked end (its run's shape picture), side by side."""
+    """Each case's kicked end (the surface of its run's shape picture), side by side."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -260,16 +264,17 @@ def draw(result: dict, root: Path, path: Path) -> None:
                   "shape.png").is_file()]
     if not cases:
         return
-    fig, axes = plt.subplots(1, len(cases), figsize=(2.6 * len(cases), 2.9), squeeze=False)
+    fig, axes = plt.subplots(1, len(cases), figsize=(3.0 * len(cases), 3.0), squeeze=False)
     for ax, r in zip(axes[0], cases, strict=True):
         img = plt.imread(root / case_name((r["v"], r["da0"], r["branch"])) / "kicked" /
                          "shape.png")
-        ax.imshow(img)
+        h, w = img.shape[:2]
+        ax.imshow(img[int(0.2 * h):int(0.95 * h), :w // 2])  # the surface, not the section
         ax.set_axis_off()
-        k = r["kicked"]
+        k, c = r["kicked"], r.get("control") or {}
+        base = (f"control {c['e']:.4f}" if "e" in c else f"(r, z) {r['rz']['e']:.4f}")
         ax.set_title(f"{r['branch']} v={r['v']:g}, Δa₀={r['da0']:g}\n→ {k['label']}, "
-                     f"{k['group']}\ne {k['e']:.4f} (control {r['control']['e']:.4f})",
-                     fontsize=7)
+                     f"{k['group']}\ne {k['e']:.4f} ({base})", fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

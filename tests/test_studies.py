@@ -666,7 +666,7 @@ REPORTS = {"constraints_study": [], "sharp_limit": [], "gallery": [], "ade_plane
            "axisymmetric": [], "nonaxisymmetric": ["--eps", "0.02"], "eps_ladder": [],
            "phase_diagram": [], "branches": [], "ade_branches": [], "azimuthal": [],
            "ade_azimuthal": [], "branch3d": [], "starfish": [], "ade_limit": [],
-           "ade_bifurcations": []}
+           "ade_bifurcations": [], "ade_octant": []}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
