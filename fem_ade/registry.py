@@ -140,7 +140,7 @@ BACKENDS = {
                    "(r, z) with the measure 2 pi r dr dz (docs/model.md §11; by default order 8, "
                    "a mesh graded to the membrane and --n from eps: 2.5 nodes per eps); or "
                    "octant: a 3D state with the mirror planes x, y, z = L/2, on one eighth "
-                   "of the box (docs/model.md §13)"),
+                   "of the box (docs/model.md §14)"),
             Option("domain", str, None, None,
                    "axisymmetric: the half-plane R,z0,z1 (r <= R, z0 <= z <= z1; default "
                    "L/sqrt(pi),0,L: the box's volume and height)"),

@@ -62,7 +62,7 @@ NOT_RUN = ((0.65, 0.8, "prolate", "cell, unstable in m = 2: for time"),
 #: the quick case: the minimal-like oblate at ε = 0.04 past its m = 2 bifurcation
 QUICK_CASES = ((0.84, 1.0, "oblate", 0.25, "quick: an oblate unstable in m = 2", True),)
 QUICK_EPS = 0.04
-#: the 3D runs: the kick's δ and the mesh (None: the switch's octant default)
+#: the 3D runs: their names and the kick's δ (the mesh: the switch's octant default)
 KICKS = (("control", 0.0), ("kicked", 0.1))
 #: a 3D run stops here if E has not settled (0.37 s a step at 97³, one thread: 25 min)
 MAX_STEPS = 4000

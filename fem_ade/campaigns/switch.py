@@ -204,9 +204,8 @@ def switch(branch: str | Path, index: int | None, out: str | Path, *, delta: flo
                              "the octant holds no such shape (a pear, or a body off centre)")
         start = Path(tmp) / "switch.npz"
         np.savez(start, **fields)
-        if octant:
-            n = n or 2 * order * math.ceil(OCTANT_NODES_PER_EPS * params.L / params.eps
-                                           / (2 * order) - 1e-9)
+        if octant:  # whole cells of order p on each half axis
+            n = n or default_nodes(params.eps, params.L, 2 * order, OCTANT_NODES_PER_EPS)
         n = n or default_nodes(params.eps, params.L, order)
         origin = {"branch": str(Path(branch).resolve()),
                   "bifurcation": None if mode is not None else (index or 0), "m": m,

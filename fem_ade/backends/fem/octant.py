@@ -1,5 +1,5 @@
 """The octant geometry of the FEM backend: a 3D state with the three mirror planes through the
-box's centre (x = y = z = L/2), computed on one eighth of the box (docs/model.md §13).
+box's centre (x = y = z = L/2), computed on one eighth of the box (docs/model.md §14).
 
 A periodic field that is even about x = c is even about x = c + L/2 too (its period maps one
 plane on the other), so on [c, c + L/2] it is the field of a 1D axis with natural (zero-flux)
