@@ -116,7 +116,8 @@ def test_a_switch_is_an_ordinary_run_folder(oblate, tmp_path, capsys):
     # the octant's
     (["--geometry", "octant", "--mode", "3", "--point", "0"], "for even m only"),
     (["--geometry", "octant", "--backend", "spectral"], "the octant geometry is the FEM's"),
-    (["--follow", "2", "--geometry", "octant"], "are the flow's"),
+    (["--follow", "2", "--geometry", "octant", "--mode", "3", "--point", "0"],
+     "for even m only"),
 ])
 def test_refusals_are_one_line(oblate, tmp_path, capsys, args, message):
     out = tmp_path / "never"
@@ -272,3 +273,26 @@ def test_following_the_born_branch_in_3d(oblate, tmp_path, capsys):
     lin = linearize(sys_, be.phi)
     assert np.max(np.abs(lin.violation[:2])) < 1e-10 * be.params.alpha
     assert np.linalg.norm(lin.grad) < 1e-5 * np.linalg.norm(sys_.gradient(be.phi))
+
+
+def test_the_octant_follows_the_same_branch(oblate, tmp_path, capsys):
+    """--follow --geometry octant: the m = 2 branch on the mirror-symmetric eighth of the box,
+    without pins, has the box's points (v, e, the amplitude) on the same nodes (32 per L of
+    order 8), and its stability line says it is the sector's."""
+    from fem_ade.campaigns.branch_folder import read_branch_table
+
+    rows = {}
+    for geometry in ("cartesian", "octant"):
+        out = tmp_path / geometry
+        assert switch_main([str(oblate), "--follow", "2", "--n", "32", "--order", "8",
+                            "--geometry", geometry, "--out", str(out),
+                            *(["--stability"] if geometry == "octant" else [])]) == 0
+        rows[geometry] = read_branch_table(out)
+    said = capsys.readouterr().out
+    assert "even in x, y and z (the octant's)" in said
+    assert json.loads((tmp_path / "octant" / "branch.json").read_text())["geometry"] == "octant"
+    for box, eighth in zip(rows["cartesian"], rows["octant"], strict=True):
+        assert eighth["v"] == pytest.approx(box["v"], abs=1e-8)
+        assert eighth["e"] == pytest.approx(box["e"], rel=1e-8)
+        assert eighth["amplitude"] == pytest.approx(box["amplitude"], abs=1e-8)
+        assert eighth["unstable_3d"] >= 1  # the branch leaves the oblate's saddle

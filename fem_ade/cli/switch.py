@@ -38,10 +38,10 @@ def _parser() -> argparse.ArgumentParser:
                          "or --geometry octant 8)")
     ap.add_argument("--backend", choices=("fem", "spectral"), default="fem")
     ap.add_argument("--geometry", choices=("cartesian", "octant"), default="cartesian",
-                    help="cartesian (default: the periodic box) or octant: the flow on one "
-                         "eighth of the box with the mirrors x, y, z = L/2 (even m and a "
-                         "state with an equatorial mirror; default order 8, 1.92 L/eps "
-                         "nodes)")
+                    help="cartesian (default: the periodic box) or octant: the run or "
+                         "--follow's branch on one eighth of the box with the mirrors x, y, "
+                         "z = L/2 (even m and a state with an equatorial mirror; default "
+                         "order 8, 1.92 L/eps nodes)")
     ap.add_argument("--max-steps", type=int, default=None,
                     help="at most this many steps (default: the steady recipe's)")
     ap.add_argument("--checkpoint-every", type=int, default=200,
@@ -94,10 +94,8 @@ def _follow(args) -> int:
     """``--follow``: :func:`fem_ade.campaigns.switch_branch.follow_switched`."""
     from fem_ade.campaigns.switch_branch import ORDER, STEP, follow_switched
 
-    if args.delta != DELTA or args.backend != "fem" or args.max_steps is not None or \
-            args.geometry != "cartesian":
-        print("fem_ade.switch: error: --delta, --backend, --geometry and --max-steps are the "
-              "flow's; "
+    if args.delta != DELTA or args.backend != "fem" or args.max_steps is not None:
+        print("fem_ade.switch: error: --delta, --backend and --max-steps are the flow's; "
               "--follow continues the branch on the FEM", file=sys.stderr)
         return 2
     order = ORDER if args.order is None else args.order
@@ -105,7 +103,7 @@ def _follow(args) -> int:
         rows = follow_switched(args.branch, args.bifurcation, args.out, points=args.follow,
                                step=STEP if args.step is None else args.step, n=args.n,
                                order=order, stability=args.stability, point=args.point,
-                               mode=args.mode, quiet=args.quiet)
+                               mode=args.mode, quiet=args.quiet, geometry=args.geometry)
     except ModelError as err:
         print(f"fem_ade.switch: error: {err}", file=sys.stderr)
         return 2
