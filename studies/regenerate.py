@@ -46,6 +46,7 @@ STEPS = (
     ("solver_bench", ["studies/solver_bench.py", "--out", RESULTS]),
     ("switch", ["studies/switch.py", "--out", RESULTS]),
     ("branch3d", ["studies/branch3d.py", "--out", RESULTS]),
+    ("branch3d_octant", ["studies/branch3d_octant.py", "--out", RESULTS]),
     ("starfish", ["studies/starfish.py", "--out", RESULTS]),
     ("ade_octant", ["studies/ade_octant.py", "--out", RESULTS]),
     ("newton3d_bench", ["studies/newton3d_bench.py", "--out", RESULTS]),
@@ -96,6 +97,8 @@ MEASUREMENTS = {"convergence": "errors and times of each resolution, in one proc
                           "one process",
                 "branch3d": "a 3D branch's points, each its Newton and stability seconds, "
                             "one after another in one process",
+                "branch3d_octant": "a 3D branch's points on the octant, each its Newton and "
+                                   "stability seconds, one after another in one process",
                 "starfish": "a 3D run's CPU seconds, after its branches, one after another "
                             "in one process",
                 "newton3d_bench": "one 3D steady state by Newton with and without its pins, "
