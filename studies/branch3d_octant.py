@@ -311,6 +311,27 @@ def figure(result: dict, out: Path, suffix: str) -> Path:
     return path
 
 
+def _ladder(c: dict) -> list[str]:
+    """The report's ladder table of case ``c``: each mesh's fit of v = v_c + c a²."""
+    lines = ["**The ladder** (v = v_c + c a² fitted to each mesh's first "
+             f"{len(c['ladder'][0]['rows'])} points; c < 0: subcritical):", "",
+             "| n | nodes per ε | unknowns | v at the first a | v_c fitted | v_c − (r, z) | c "
+             "| fit residual | direction | lowest λ (sector) | Newton s, median |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for m in c["ladder"]:
+        secs = sorted(r["newton_s"] for r in m["rows"])
+        lam = ", ".join(f"{r['eigenvalues'][0]:.2g}" for r in m["rows"]
+                        if r.get("eigenvalues")) or "not computed"
+        way = ("subcritical" if m["c"] < 0 else "supercritical") + (
+            "" if len(m["rows"]) > 2 else " (2 points: no residual to judge the a² law by)")
+        first = m["rows"][0]
+        lines.append(f"| {m['n']} | {m['nodes_per_eps']:.2f} | {m['unknowns']} | "
+                     f"{first['v']:.6f} (a = {first['amplitude']:.2f}) | {m['v_c']:.6f} | "
+                     f"{m['v_c'] - c['v_bifurcation']:+.1e} | {m['c']:+.4f} | "
+                     f"{m['residual']:.1e} | {way} | {lam} | {secs[len(secs) // 2]:.1f} |")
+    return lines
+
+
 def report(result: dict, out: Path, suffix: str) -> None:
     lines = ["# The oblate's m = 2 branch in 3D at small ε, on the octant", "",
              "Written by `studies/branch3d_octant.py` (its docstring says what it runs). "
@@ -336,20 +357,7 @@ def report(result: dict, out: Path, suffix: str) -> None:
         lines += [f"## {c['name']}, R₀ = {c['R0']:g}", "",
                   f"The (r, z) oblate's block m = {c['m']} crosses zero at v_c = "
                   f"{c['v_bifurcation']:.5f} ({c['rz_n']} nodes per L).", "",
-                  "**The ladder** (v = v_c + c a² fitted to each mesh's first "
-                  f"{len(c['ladder'][0]['rows'])} points; c < 0: subcritical):", "",
-                  "| n | nodes per ε | unknowns | v at a = 0.1 | v_c fitted | v_c − (r, z) | c "
-                  "| fit residual | direction | lowest λ (sector) | Newton s, median |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|"]
-        for m in c["ladder"]:
-            secs = sorted(r["newton_s"] for r in m["rows"])
-            lam = ", ".join(f"{r['eigenvalues'][0]:.2g}" for r in m["rows"]
-                            if r.get("eigenvalues")) or "not computed"
-            way = "subcritical" if m["c"] < 0 else "supercritical"
-            lines.append(f"| {m['n']} | {m['nodes_per_eps']:.2f} | {m['unknowns']} | "
-                         f"{m['rows'][0]['v']:.6f} | {m['v_c']:.6f} | "
-                         f"{m['v_c'] - c['v_bifurcation']:+.1e} | {m['c']:+.4f} | "
-                         f"{m['residual']:.1e} | {way} | {lam} | {secs[len(secs) // 2]:.1f} |")
+                  *_ladder(c)]
         secs = sorted(r["newton_s"] for r in c["rows"])
         stab = sorted(r["seconds"] - r["newton_s"] for r in c["rows"])
         lines += ["", f"**The branch followed** on {c['n']} nodes per L "
