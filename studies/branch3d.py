@@ -36,7 +36,7 @@ import json  # noqa: E402
 import math  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from _lib.branches import branch_rows, make_branch  # noqa: E402
+from _lib.branches import branch_rows, e_at, make_branch, three_points  # noqa: E402
 
 OUT = Path("runs") / "studies"
 #: (name, ε, R₀, the oblate branch's v from, to, step, the 3D mesh's nodes and order, the
@@ -48,12 +48,9 @@ QUICK_CASES = (("eps=0.04", 0.04, 0.25, 0.85, 0.80, 0.01, 32, 8, 3, None),)
 
 
 def _interpolated(rows: list[dict], v: float) -> float | None:
-    """e of an axisymmetric branch at v (linear between its points; None outside them)."""
-    pts = sorted((float(r["v"]), float(r["e"])) for r in rows if r.get("e") not in ("", None))
-    for (v0, e0), (v1, e1) in zip(pts, pts[1:], strict=False):
-        if v0 <= v <= v1:
-            return e0 + (e1 - e0) * (v - v0) / (v1 - v0)
-    return None
+    """e of an axisymmetric branch's rows at v (:func:`_lib.branches.e_at`)."""
+    return e_at([(float(r["v"]), float(r["e"])) for r in rows
+                 if r.get("e") not in ("", None)], v)
 
 
 def case(root: Path, c: tuple) -> dict:
@@ -107,38 +104,15 @@ def _symmetries(oblate: Path, folder: Path, rows: list[dict], n: int, order: int
 def shapes(root: Path, c: dict, out: Path) -> Path | None:
     """Three of the branch's points (its first, middle and last) as 3D pictures in one
     PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
     from fem_ade.campaigns.switch_branch import switched_start
-    from fem_ade.plots.figures import compact_png, save_figure
-    from fem_ade.plots.shapes import render_shape
 
-    folder = root / f"d2-{c['name']}"
-    rows = c["rows"]
-    picks = sorted({0, len(rows) // 2, len(rows) - 1})
     _, be, _ = switched_start(root / f"oblate-{c['name']}", 0, None, None, c["n"],
                               c["order"])
-    fig, axes = plt.subplots(len(picks), 1, figsize=(10, 5 * len(picks)))
-    for ax, k in zip(np.atleast_1d(axes), picks, strict=True):
-        with np.load(folder / "points" / f"{k:04d}" / "final.npz") as z:
-            be._set(np.array(z["phi"]), None)
-        r = rows[k]
-        png = folder / f"shape-{k:04d}.png"
-        render_shape(be.grid_phi(), be.params.L, png,
-                     title=f"point {k}: v = {r['v']:.4f}, e = {r['e']:.4f}, "
-                           f"{r['unstable_3d']} unstable in 3D")
-        ax.imshow(plt.imread(png))
-        ax.set_axis_off()
-    fig.subplots_adjust(left=0, right=1, top=1, bottom=0, hspace=0.02)
-    path = out / f"branch3d-shapes-{c['name']}.png"
-    save_figure(fig, path)
-    plt.close(fig)
-    compact_png(path, 64, scale=0.6)  # the repository's 6 MB
-    return path
+    return three_points(
+        be, root / f"d2-{c['name']}", c["rows"],
+        lambda k, r: (f"point {k}: v = {r['v']:.4f}, e = {r['e']:.4f}, "
+                      f"{r['unstable_3d']} unstable in 3D"),
+        out / f"branch3d-shapes-{c['name']}.png", 64, 0.6)  # the repository's 6 MB
 
 
 def figure(result: dict, out: Path, suffix: str) -> Path:

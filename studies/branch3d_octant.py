@@ -48,7 +48,7 @@ import json  # noqa: E402
 import math  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from _lib.branches import branch_rows, make_branch  # noqa: E402
+from _lib.branches import branch_rows, e_at, make_branch, three_points  # noqa: E402
 
 OUT = Path("runs") / "studies"
 ORDER = 8
@@ -77,15 +77,6 @@ BOX = ("eps=0.02", 96, ["vesicle", "--eps", "0.02", "--R0", "0.2", "--param", "v
 def rz_nodes(eps: float) -> int:
     """The (r, z) branches' nodes per L: :data:`RZ_NODES_PER_EPS` per ε, whole cells."""
     return ORDER * math.ceil(RZ_NODES_PER_EPS / (eps * ORDER) - 1e-9)
-
-
-def _interpolated(pts: list[tuple[float, float]], v: float) -> float | None:
-    """e of an axisymmetric branch at v (linear between its points; None outside them)."""
-    pts = sorted(pts)
-    for (v0, e0), (v1, e1) in zip(pts, pts[1:], strict=False):
-        if v0 <= v <= v1:
-            return e0 + (e1 - e0) * (v - v0) / (v1 - v0)
-    return None
 
 
 def first_sheet(rows: list[dict]) -> list[tuple[float, float]]:
@@ -162,8 +153,8 @@ def case(root: Path, c: tuple) -> dict:
     rows = _follow(oblate, folder, n_follow, points, stability)
     ended = json.loads((folder / "ended.json").read_text())["why"]
     gaps = clearances(oblate, folder, n_follow, len(rows))
-    out_rows = [{**_kept(r), "e_oblate": _interpolated(ob, r["v"]),
-                 "e_prolate": _interpolated(pr, r["v"]), "gap": g}
+    out_rows = [{**_kept(r), "e_oblate": e_at(ob, r["v"]),
+                 "e_prolate": e_at(pr, r["v"]), "gap": g}
                 for r, g in zip(rows, gaps, strict=True)]
     return {"name": name, "eps": eps, "R0": R0, "m": bif["m"], "v_bifurcation": bif["v"],
             "rz_n": rz_nodes(eps), "ladder": meshes, "n": n_follow, "rows": out_rows,
@@ -235,38 +226,15 @@ def quick_box(root: Path, c: dict) -> dict:
 
 def shapes(root: Path, c: dict, out: Path) -> Path:
     """Three of the followed branch's points (its first, middle and last) in one PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
     from fem_ade.campaigns.switch_branch import switched_start
-    from fem_ade.plots.figures import compact_png, save_figure
-    from fem_ade.plots.shapes import render_shape
 
-    folder = root / f"d2-{c['name']}-n{c['n']}"
-    rows = c["rows"]
-    picks = sorted({0, len(rows) // 2, len(rows) - 1})
     _, be, _ = switched_start(root / f"window-{c['name']}", 0, None, None, c["n"], ORDER,
                               "octant")
-    fig, axes = plt.subplots(len(picks), 1, figsize=(10, 5 * len(picks)))
-    for ax, k in zip(np.atleast_1d(axes), picks, strict=True):
-        with np.load(folder / "points" / f"{k:04d}" / "final.npz") as z:
-            be._set(np.array(z["phi"]), None)
-        r = rows[k]
-        png = folder / f"shape-{k:04d}.png"
-        render_shape(be.grid_phi(), be.params.L, png,
-                     title=f"{c['name']}, point {k}: v = {r['v']:.4f}, a = "
-                           f"{r['amplitude']:.2f}, e = {r['e']:.4f}")
-        ax.imshow(plt.imread(png))
-        ax.set_axis_off()
-    fig.subplots_adjust(left=0, right=1, top=1, bottom=0, hspace=0.02)
-    path = out / f"branch3d_octant-shapes-{c['name']}.png"
-    save_figure(fig, path)
-    plt.close(fig)
-    compact_png(path, 32, scale=0.4)  # the repository's 6.2 MB
-    return path
+    return three_points(
+        be, root / f"d2-{c['name']}-n{c['n']}", c["rows"],
+        lambda k, r: (f"{c['name']}, point {k}: v = {r['v']:.4f}, a = "
+                      f"{r['amplitude']:.2f}, e = {r['e']:.4f}"),
+        out / f"branch3d_octant-shapes-{c['name']}.png", 32, 0.4)  # the repository's 6.2 MB
 
 
 def figure(result: dict, out: Path, suffix: str) -> Path:

@@ -138,6 +138,29 @@ def mirror_error(phi_grid: np.ndarray) -> float:
     return worst
 
 
+def check_octant_mode(m: int) -> None:
+    """ModelError (one line) for a mode the octant cannot hold: an odd m (cos mθ is even
+    about the mirrors x and y for even m only)."""
+    if m % 2:
+        raise ModelError(f"the octant holds cos m theta for even m only (its mirrors x and y); "
+                         f"this is m = {m}")
+
+
+def check_octant_mirrors(point, phi_grid: np.ndarray) -> None:
+    """ModelError (one line) for a start that differs from its mirror images about the box's
+    centre planes by more than :data:`MIRROR_TOL` (a pear, a body off centre)."""
+    if (err := mirror_error(phi_grid)) > MIRROR_TOL:
+        raise ModelError(f"{point}: the state is not symmetric about the box's centre "
+                         f"planes (max |phi - mirror image| = {err:.2g} > {MIRROR_TOL:g}): "
+                         "the octant holds no such shape (a pear, or a body off centre)")
+
+
+def octant_nodes(params, order: int) -> int:
+    """The octant's default nodes per L: :data:`OCTANT_NODES_PER_EPS` per ε, whole cells of
+    order p on each half axis."""
+    return default_nodes(params.eps, params.L, 2 * order, OCTANT_NODES_PER_EPS)
+
+
 def default_nodes(eps: float, L: float, order: int, per_eps: float = NODES_PER_EPS) -> int:
     """Nodes per axis of the 3D mesh: ``per_eps``·L/ε (default :data:`NODES_PER_EPS`), up
     to a multiple of the order (a product that rounding lifts a hair above a multiple, as
@@ -187,9 +210,8 @@ def switch(branch: str | Path, index: int | None, out: str | Path, *, delta: flo
     order = (OCTANT_ORDER if octant else RUN_ORDERS["tensor"]) if order is None else order
     bif, point = chosen(branch, index, point, mode)
     m = int(bif["m"])
-    if octant and m % 2:
-        raise ModelError(f"the octant holds cos m theta for even m only (its mirrors x and y); "
-                         f"this is m = {m}")
+    if octant:
+        check_octant_mode(m)
     options = {"order": order} if backend == "fem" else {}
     if octant:
         options["geometry"] = "octant"
@@ -198,14 +220,12 @@ def switch(branch: str | Path, index: int | None, out: str | Path, *, delta: flo
         if lam >= 0:
             raise ModelError(f"{point}: its block m = {m} has no negative eigenvalue "
                              f"(lowest {lam:.3e}): nothing to switch along")
-        if octant and (err := mirror_error(fields["phi_grid"])) > MIRROR_TOL:
-            raise ModelError(f"{point}: the state is not symmetric about the box's centre "
-                             f"planes (max |phi - mirror image| = {err:.2g} > {MIRROR_TOL:g}): "
-                             "the octant holds no such shape (a pear, or a body off centre)")
+        if octant:
+            check_octant_mirrors(point, fields["phi_grid"])
         start = Path(tmp) / "switch.npz"
         np.savez(start, **fields)
-        if octant:  # whole cells of order p on each half axis
-            n = n or default_nodes(params.eps, params.L, 2 * order, OCTANT_NODES_PER_EPS)
+        if octant:
+            n = n or octant_nodes(params, order)
         n = n or default_nodes(params.eps, params.L, order)
         origin = {"branch": str(Path(branch).resolve()),
                   "bifurcation": None if mode is not None else (index or 0), "m": m,

@@ -94,11 +94,11 @@ def switched_start(branch, index, point, mode, n, order, geometry: str = "cartes
     with the box's mirrors (checked as :func:`fem_ade.campaigns.switch.switch` does)."""
     from fem_ade.backends.base import make_backend
     from fem_ade.campaigns.switch import (
-        MIRROR_TOL,
-        OCTANT_NODES_PER_EPS,
+        check_octant_mirrors,
+        check_octant_mode,
         chosen,
         default_nodes,
-        mirror_error,
+        octant_nodes,
         start_fields,
     )
     from fem_ade.scenes.catalogue import Scene
@@ -112,16 +112,12 @@ def switched_start(branch, index, point, mode, n, order, geometry: str = "cartes
     octant = geometry == "octant"
     bif, folder = chosen(branch, index, point, mode)
     m = int(bif["m"])
-    if octant and m % 2:
-        raise ModelError(f"the octant holds cos m theta for even m only (its mirrors x and y); "
-                         f"this is m = {m}")
+    if octant:
+        check_octant_mode(m)
     params, fields, lam = start_fields(folder, m, 1.0, phase=0.0 if octant else None)
-    if octant and (err := mirror_error(fields["phi_grid"])) > MIRROR_TOL:
-        raise ModelError(f"{folder}: the state is not symmetric about the box's centre planes "
-                         f"(max |phi - mirror image| = {err:.2g} > {MIRROR_TOL:g}): the "
-                         "octant holds no such shape (a pear, or a body off centre)")
-    if octant:  # whole cells of order p on each half axis
-        n = n or default_nodes(params.eps, params.L, 2 * order, OCTANT_NODES_PER_EPS)
+    if octant:
+        check_octant_mirrors(folder, fields["phi_grid"])
+        n = n or octant_nodes(params, order)
     n = n or default_nodes(params.eps, params.L, order, NODES_PER_EPS)
     with tempfile.TemporaryDirectory() as tmp:
         start = Path(tmp) / "axisymmetric.npz"
