@@ -44,8 +44,8 @@ L/2, so the whole branch lies in that sector. No rigid motion keeps the mirrors,
 no pins; the default mesh is the flow's there (order 8, 1.92 nodes per ε). Measured, the
 minimal model's oblate at ε = 0.04 (R₀ = 0.25) on 32 nodes per L of order 8: the octant's
 first three points equal the box's in v, e and E to the ten digits branch.csv keeps, at 0.27
-s a point against 2.0 s. Its ``stability`` is the sector's (perturbations even in x, y and
-z): a lower bound on the 3D count.
+s a point against 2.0 s (wall, one BLAS thread, nothing else running). Its ``stability`` is
+the sector's (perturbations even in x, y and z): a lower bound on the 3D count.
 
 The folder is a branch folder (:mod:`fem_ade.campaigns.branch_folder`): branch.json (what
 the branch is: the bifurcation it left, its mesh and step), points/NNNN/ (final.npz: φ on the
