@@ -48,6 +48,7 @@ STEPS = (
     ("branch3d", ["studies/branch3d.py", "--out", RESULTS]),
     ("branch3d_octant", ["studies/branch3d_octant.py", "--out", RESULTS]),
     ("starfish", ["studies/starfish.py", "--out", RESULTS]),
+    ("starfish_octant", ["studies/starfish_octant.py", "--out", RESULTS]),
     ("ade_octant", ["studies/ade_octant.py", "--out", RESULTS]),
     ("newton3d_bench", ["studies/newton3d_bench.py", "--out", RESULTS]),
     ("nonaxisymmetric", ["studies/nonaxisymmetric.py", "--out", RESULTS, "--eps", "0.02"]),
@@ -101,6 +102,8 @@ MEASUREMENTS = {"convergence": "errors and times of each resolution, in one proc
                                    "stability seconds, one after another in one process",
                 "starfish": "a 3D run's CPU seconds, after its branches, one after another "
                             "in one process",
+                "starfish_octant": "3D runs' CPU seconds and their stability, one after "
+                                   "another in one process",
                 "newton3d_bench": "one 3D steady state by Newton with and without its pins, "
                                   "CPU seconds in one process",
                 "ade_octant": "each state's (r, z) point, then its two 3D octant runs in a "

@@ -1,0 +1,390 @@
+"""Where the discocyte's rim modes lead at v = 0.7, ε = 0.01: a four-armed starfish on the
+octant, and how its energy stands against the axisymmetric shapes (issue 44: the paper's
+starfish).
+
+``starfish.py`` found the discocyte's blocks m = 2 … 6 unstable at its rim at v = 0.7,
+ε = 0.01 (κ̄/κ = 1.4, R₀ = 0.2), and left them unfollowed: a 3D run there on the periodic box
+at 2.56 nodes per ε was beyond that session. A four-armed shape has the mirrors x, y and z
+(cos 4θ with θ₀ = 0, and the disc's equator), so it lies in the octant's sector
+(:mod:`fem_ade.backends.fem.octant`): an eighth of the unknowns.
+
+- **The lines** (the (r, z) FEM, order 8, 2.5 nodes per ε, blocks m ≤ 4): the discocyte
+  from Δa₀ = 1.0 to 1.6 (``--branch oblate``), and the prolate (``--branch prolate``) from
+  1.3 to 1.7: at v = 0.7 the prolate is the lowest axisymmetric branch beyond Δa₀ ≈ 1.2
+  (``ade_limit.md``).
+- **The switches** (``fem_ade.switch --point I --mode m``): from the discocyte at Δa₀ = 1.6,
+  where its blocks m = 4, 3, 2 are unstable (−1.5e-4, −1.1e-4, −4.9e-5), the flow from
+  φ + 0.1 ψ_m cos mθ for m = 4 and m = 2 on the octant (order 8, 1.92 nodes per ε). An
+  m = 3 shape has no mirror pair x, y: it needs the box (not run here; see the notes).
+- **The ε ladder**: the m = 4 flow's end reseeded at ε = 0.02 and 0.014 (the same v, Δa₀,
+  R₀; the octant at 1.92 nodes per ε), each run to its steady state, beside the (r, z)
+  prolate at that ε/R₀ (:data:`LADDER_R0`: at R₀ = 0.2 it does not fit the unit box).
+
+Each end: its label, genus, arms, symmetry, its arms' width and thickness in units of ε
+(:func:`arm_geometry`), e beside the (r, z) discocyte's and prolate's at its Δa₀, and on the
+octant the m = 4 ends' stability in the sector (perturbations even in x, y and z: a lower
+bound on the 3D count; Newton's polish first, ``fem_ade.stability``).
+
+**Hypothesis**: the m = 4 rim mode leads to a four-armed starfish that is a steady state of
+the model at ε = 0.01, with arms many ε wide (so not the phase field's pinching); it is
+higher in energy than the prolate (the (r, z) lowest) at its (v, Δa₀). **Control**: the
+m = 2 flow on the same octant ends on the prolate (its e equal to the (r, z) prolate's within
+the octant mesh's error), which measures that error.
+
+Writes ``OUT/starfish_octant.md`` (with the hand-written ``OUT/starfish_octant_notes.md``),
+``.json`` and ``starfish_octant-shapes.png`` (the ends, rendered); the branch and run
+folders in ``OUT/starfish_octant/`` (not committed; each run resumes from its checkpoint).
+
+    python studies/starfish_octant.py --out studies/results   # ~2.5 h on one core
+    python studies/starfish_octant.py --quick                 # a short line, 10 steps, ~40 s
+"""
+
+from __future__ import annotations
+
+from _lib.cli import one_thread, results, study_parser, write_report
+
+one_thread(fft=False)
+
+import json  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from _lib.branches import branch_rows, make_branch  # noqa: E402
+
+OUT = Path("runs") / "studies"
+V, KBAR, R0, EPS = 0.7, 1.4, 0.2, 0.01
+#: the (r, z) lines: (branch, Δa₀ from, to, step)
+LINES = (("oblate", 1.0, 1.6, 0.05), ("prolate", 1.3, 1.7, 0.05))
+QUICK_LINES = (("oblate", 1.45, 1.46, 0.01),)
+#: the switches: (m, geometry, the discocyte's Δa₀ to start from (its nearest point), the
+#: end's stability or not: the sector's at 97³ unknowns took 13 min beside two other runs,
+#: and m = 2's end is the control, its e the point)
+SWITCHES = ((4, "octant", 1.6, True), (2, "octant", 1.6, False))
+QUICK_SWITCHES = ((4, "octant", 1.45, False),)
+#: the ε ladder: the m = 4 end reseeded at these ε (octant, 1.92 nodes per ε)
+LADDER = (0.02, 0.014)
+#: the ladder's (r, z) prolate: at R₀ = 0.2 it does not fit the unit box at ε = 0.014 and
+#: 0.02 (the seed's fit rule: 0.1 L + 2ε to spare), so it is followed at this R₀ with ε
+#: scaled by it (the same ε/R₀; L/R₀ 6.7 instead of 5)
+LADDER_R0 = 0.15
+QUICK_LADDER = (0.02,)
+#: the quick mode's meshes (nodes per L) and steps: the plumbing only
+QUICK_N, QUICK_STEPS = 128, 10
+
+
+def _line(root: Path, eps: float, branch: str, start: float, stop: float,
+          step: float, r0: float = R0) -> dict:
+    """One (r, z) line at (V, ``eps``) of radius ``r0`` (its ``eps`` in the study's units,
+    ε·R₀/r0 in the run's): its folder and rows (ModelError's line if none)."""
+    name = "discocyte" if branch == "oblate" else branch
+    run_eps = round(eps * r0 / R0, 10)
+    made = make_branch(root / (f"{name}-v={V:g}-eps={eps:g}"
+                               + ("" if r0 == R0 else f"-R0={r0:g}")),
+                       ["vesicle", "--branch", branch, "--v", str(V), "--kbar", str(KBAR),
+                        "--eps", str(run_eps), "--R0", str(r0), "--param", "da0", "--from",
+                        str(start), "--to", str(stop), "--step", str(step), "--modes", "4"])
+    if isinstance(made, str):
+        return {"branch": branch, "eps": eps, "failed": made}
+    rows = [{"da0": float(r["da0"]), "e": float(r["e"]), "label": r["label"],
+             "lowest": [float(f"{float(r[f'lowest_m{m}']):.3g}") for m in range(5)],
+             "unstable_3d": int(r["unstable_3d"])} for r in branch_rows(made)]
+    return {"branch": branch, "eps": eps, "failed": None, "folder": str(made), "rows": rows}
+
+
+def e_at_da0(line: dict | None, da0: float) -> float | None:
+    """e of an (r, z) line at Δa₀ (linear between its two points about it; None outside)."""
+    if not line or line["failed"]:
+        return None
+    pts = sorted((r["da0"], r["e"]) for r in line["rows"])
+    for (a0, e0), (a1, e1) in zip(pts, pts[1:], strict=False):
+        if a0 <= da0 <= a1:
+            return e0 + (e1 - e0) * (da0 - a0) / (a1 - a0)
+    return None
+
+
+def arm_geometry(grid, L: float, eps: float) -> dict:
+    """A flat body's arms, from φ on a uniform periodic grid (the body away from the box's
+    faces): in its mid-plane z = z_c (z_c, and the centre, the mean of the nodes inside),
+    R(θ), the distance from the centre to the membrane (φ = 0) along 720 rays; the tips
+    (max R) and necks (min R); on the circle of radius r½ = (R_tip + R_neck)/2 the number
+    of arcs inside (the arms) and their mean length (the arm's width there); along z through
+    the arm at r½ in the tip's direction, and through the centre, the body's thickness. The
+    lengths in units of ε."""
+    import numpy as np
+    from scipy.ndimage import map_coordinates
+
+    n = grid.shape[0]
+    h = L / n
+    c = np.argwhere(grid > 0).mean(axis=0)
+    theta = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+    r = np.arange(0.0, n / 2, 0.25)
+
+    def at(x, y, z):
+        return map_coordinates(grid, [x, y, z], order=1, mode="grid-wrap")
+
+    rays = at(c[0] + np.outer(np.cos(theta), r), c[1] + np.outer(np.sin(theta), r),
+              np.full((theta.size, r.size), c[2]))
+    R = r[np.argmax(rays <= 0, axis=1)]
+    tip, neck = float(R.max()), float(R.min())
+    half = (tip + neck) / 2
+    ring = at(c[0] + half * np.cos(theta), c[1] + half * np.sin(theta),
+              np.full(theta.size, c[2])) > 0
+    arms = int(np.count_nonzero(ring & ~np.roll(ring, 1)))
+    width = np.count_nonzero(ring) / theta.size * 2 * np.pi * half / max(arms, 1)
+    zs = np.arange(0.0, n, 0.25)
+
+    def thickness(x, y):
+        return float(np.count_nonzero(at(np.full(zs.size, x), np.full(zs.size, y), zs) > 0)
+                     * 0.25)
+
+    t = float(theta[np.argmax(R)])
+    arm_t = thickness(c[0] + half * np.cos(t), c[1] + half * np.sin(t))
+    return {"arms": arms, "tip_r": tip * h, "neck_r": neck * h,
+            "width_eps": float(width * h / eps), "thickness_eps": arm_t * h / eps,
+            "centre_thickness_eps": thickness(c[0], c[1]) * h / eps,
+            "tip_over_neck": tip / neck if neck > 0 else None}
+
+
+def _finished(folder: Path, start) -> None:
+    """Run ``start()`` into ``folder`` once: a finished run (summary.json) is kept, an
+    interrupted one with its checkpoint resumed."""
+    from fem_ade.engine.runs import resume
+
+    if (folder / "summary.json").is_file():
+        return
+    if (folder / "checkpoint.npz").is_file():
+        resume(folder)
+    else:
+        start()
+
+
+def run_switch(root: Path, line: dict, m: int, geometry: str, da0: float,
+               quick: bool) -> tuple[Path, int]:
+    """The flow from the discocyte's point nearest ``da0`` along block m: (its run folder,
+    the point)."""
+    from fem_ade.campaigns.switch import switch
+
+    rows = line["rows"]
+    k = min(range(len(rows)), key=lambda i: abs(rows[i]["da0"] - da0))
+    folder = root / f"switched-m{m}-eps={line['eps']:g}"
+    kw = {"n": QUICK_N, "max_steps": QUICK_STEPS} if quick else {}
+    _finished(folder, lambda: switch(line["folder"], None, folder, point=k, mode=m,
+                                     quiet=True, geometry=geometry, **kw))
+    return folder, k
+
+
+def run_reseed(root: Path, source: Path, eps: float, da0: float, quick: bool) -> Path:
+    """The run from ``source``'s end at ε = ``eps`` (the same v, Δa₀, R₀; the octant at the
+    switch's order and nodes per ε), to a steady state as the switch's flows."""
+    from fem_ade.campaigns.switch import (
+        OCTANT_NODES_PER_EPS,
+        OCTANT_ORDER,
+        UNTIL_STEADY,
+        default_nodes,
+    )
+    from fem_ade.cli.run import main as run_main
+
+    folder = root / f"reseeded-m4-eps={eps:g}"
+    n = default_nodes(eps, 1.0, 2 * OCTANT_ORDER, OCTANT_NODES_PER_EPS)
+    args = ["vesicle", "--branch", "oblate", "--v", str(V), "--da0", repr(da0), "--kbar",
+            str(KBAR), "--eps", str(eps), "--R0", str(R0), "--geometry", "octant", "--order",
+            str(OCTANT_ORDER),
+            "--n", str(n), "--phi0", str(source), "--recipe", "steady", "--until-steady",
+            str(UNTIL_STEADY), "--checkpoint-every", "200", "--quiet", "--out", str(folder)]
+
+    def start():
+        if run_main([*args, *(["--max-steps", str(QUICK_STEPS)] if quick else [])]) != 0:
+            raise RuntimeError(f"fem_ade.run {' '.join(args)} failed")
+
+    _finished(folder, start)
+    return folder
+
+
+def describe_end(folder: Path, eps: float, stability: bool) -> dict:
+    """A 3D run's end: its status, shape, arms (:func:`arm_geometry`), e and (with
+    ``stability``) the sector's or the box's lowest eigenvalues after Newton's polish; kept
+    in ``folder/end.json`` (the stability of 1M unknowns takes minutes)."""
+    import numpy as np
+
+    from fem_ade.analysis.shape import symmetry_group
+    from fem_ade.analysis.sharp import reduced_energy
+    from fem_ade.campaigns.stability import cartesian, load_state, polish
+    from fem_ade.model.params import ModelError
+
+    kept = folder / "end.json"
+    if kept.is_file():
+        return json.loads(kept.read_text())
+    s = json.loads((folder / "summary.json").read_text())
+    shape = s["shape"]
+    be, _ = load_state(folder)
+    out = {"folder": folder.name, "eps": eps, "status": s["status"], "steps": s["steps"],
+           "cpu_s": round(s["cpu_s"], 1), "n": s["n"],
+           "order": s["backend_info"].get("order"),
+           "geometry": s["backend_info"].get("geometry", "cartesian"),
+           "label": shape["label"], "genus": shape["genus"], "arms": shape["arms"],
+           "symmetry": symmetry_group(shape),
+           "semi_axes": (shape.get("body") or {}).get("semi_axes"),
+           "e": reduced_energy(s["final"]),
+           "geometry_of_arms": arm_geometry(np.asarray(be.grid_phi()), be.params.L, eps),
+           "stability": None}
+    if stability:
+        try:
+            steady = polish(be)
+            st = cartesian(be)
+            out["stability"] = {"newton": steady["newton_iterations"],
+                                "unstable": st.unstable_3d,
+                                "eigenvalues": [float(x) for x in st.eigenvalues],
+                                "seconds": st.seconds["all"]}
+        except ModelError as err:
+            out["stability"] = {"failed": str(err)}
+    kept.write_text(json.dumps(out, indent=1) + "\n")
+    return out
+
+
+def figure(result: dict, root: Path, out: Path) -> Path | None:
+    """The ends' 3D views (each run's shape.png, its left half), one panel each."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    from fem_ade.plots.figures import save_figure
+
+    ends = [x for x in [*result["switches"], *result["ladder"]]
+            if (root / x["folder"] / "shape.png").is_file()]
+    if not ends:
+        return None
+    fig, axes = plt.subplots(1, len(ends), figsize=(2.6 * len(ends), 2.6), squeeze=False)
+    for ax, x in zip(axes[0], ends, strict=True):
+        with Image.open(root / x["folder"] / "shape.png") as im:
+            w, h = im.size
+            ax.imshow(im.convert("RGB").crop((int(0.08 * w), int(0.3 * h), w // 2,
+                                              int(0.85 * h))))
+        ax.set_axis_off()
+        ax.set_title(f"{_start(x)}, ε = {x['eps']:g}\n{x['label']}, e = {x['e']:.3f}",
+                     fontsize=7)
+    path = out / "starfish_octant-shapes.png"
+    save_figure(fig, path, dpi=90, colours=48, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def _start(x: dict) -> str:
+    return f"m = {x['m']}" if "m" in x else "reseeded"
+
+
+def _stability(x: dict) -> str:
+    st = x["stability"]
+    if st is None:
+        return "not computed"
+    if "failed" in st:
+        return st["failed"]
+    sector = "sector" if x["geometry"] == "octant" else "box"
+    return (f"{st['unstable']} unstable ({sector}; lowest "
+            f"{', '.join(f'{v:.2g}' for v in st['eigenvalues'][:2])}; {st['seconds']:.0f} s)")
+
+
+def _row(x: dict, disc: float | None, prolate: float | None) -> str:
+    g = x["geometry_of_arms"]
+    mesh = (f"{x['geometry']}, {x['n']}/L, p = {x['order']}")
+
+    def vs(e):
+        return "—" if e is None else f"{e:.4f} ({x['e'] - e:+.4f})"
+
+    return (f"| {_start(x)} | {x['eps']:g} | {x.get('da0', 0):.4f} | {mesh} | {x['status']}, "
+            f"{x['steps']} steps, {x['cpu_s']:.0f} s | {x['label']}, genus "
+            f"{', '.join(map(str, x['genus']))}, {x['symmetry']} | {g['arms']} | "
+            f"{g['width_eps']:.1f} | {g['thickness_eps']:.1f} | {g['centre_thickness_eps']:.1f}"
+            f" | {x['e']:.4f} | {vs(disc)} | {vs(prolate)} | {_stability(x)} |")
+
+
+def _lines_table(result: dict) -> list[str]:
+    out = ["| branch | ε | R₀ | Δa₀ | end | first point unstable in m = 2 | m = 3 | m = 4 |",
+           "|---|---|---|---|---|---|---|---|"]
+    for x in result["lines"]:
+        if x["failed"]:
+            out.append(f"| {x['branch']} | {x['eps']:g} | {x.get('r0', R0):g} | — | "
+                       f"{x['failed']} | | | |")
+            continue
+        rows = x["rows"]
+        first = [next((f"{r['da0']:.3f}" for r in rows if r["lowest"][m] < 0), "stable")
+                 for m in (2, 3, 4)]
+        out.append(f"| {x['branch']} | {x['eps']:g} | {x.get('r0', R0):g} | "
+                   f"{rows[0]['da0']:.3f}–{rows[-1]['da0']:.3f}"
+                   f" | {rows[-1]['label']} | " + " | ".join(first) + " |")
+    return out
+
+
+def report(result: dict, out: Path, suffix: str) -> None:
+    lines = ["# Where the discocyte's rim modes lead at v = 0.7: starfish on the octant", "",
+             "Written by `studies/starfish_octant.py` (its docstring says what it runs). "
+             f"v = {V:g}, κ̄/κ = {KBAR:g}, R₀ = {R0:g}. The (r, z) lines (order 8, 2.5 nodes "
+             "per ε, blocks m ≤ 4; a block's first unstable point on the line):", "",
+             *_lines_table(result), "",
+             "The 3D ends: the flow from the discocyte's point at Δa₀ along block m (switch), "
+             "or from the m = 4 end at another ε (reseeded), to a steady state (E changing by "
+             "< 1e-13 per step, relative) or the step cap. Arms: on the circle halfway between "
+             "the necks and the tips in the mid-plane, the arcs inside, their mean width; the "
+             "arm's and the centre's thickness along z; in units of ε. e beside the (r, z) "
+             "discocyte's and prolate's at the same Δa₀ and ε (the difference in brackets). "
+             "The sector's stability: perturbations even in x, y and z (a lower bound on the "
+             "3D count), after Newton's polish; CPU: the flow's, one BLAS thread.", "",
+             "| start | ε | Δa₀ | mesh | end | shape | arms | width/ε | arm thickness/ε | "
+             "centre thickness/ε | e | e discocyte | e prolate | stability |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    by = {}  # per (branch, ε): R₀'s line where there is one, else the ladder's
+    for x in sorted(result["lines"], key=lambda x: x.get("r0", R0) == R0):
+        if not x["failed"]:
+            by[(x["branch"], x["eps"])] = x
+    for x in [*result["switches"], *result["ladder"]]:
+        lines.append(_row(x, e_at_da0(by.get(("oblate", x["eps"])), x["da0"]),
+                          e_at_da0(by.get(("prolate", x["eps"])), x["da0"])))
+    if not suffix and (out / "starfish_octant-shapes.png").is_file():
+        lines += ["", "![the ends](starfish_octant-shapes.png)"]
+    write_report(out, f"starfish_octant{suffix}", lines)
+
+
+def compute(root: Path, quick: bool) -> dict:
+    root.mkdir(parents=True, exist_ok=True)
+    lines = [_line(root, EPS, *x) for x in (QUICK_LINES if quick else LINES)]
+    disc = lines[0]
+    if disc["failed"]:
+        return {"lines": lines, "switches": [], "ladder": []}
+    switches = []
+    for m, geometry, da0, stability in QUICK_SWITCHES if quick else SWITCHES:
+        folder, k = run_switch(root, disc, m, geometry, da0, quick)
+        end = describe_end(folder, EPS, stability)
+        switches.append({**end, "m": m, "point": k, "da0": disc["rows"][k]["da0"]})
+    source = root / switches[0]["folder"]
+    if not quick:  # the control of the ladder's smaller R₀ (L/R₀ 6.7): at ε = 0.01 beside R₀'s
+        lines.append({**_line(root, EPS, "prolate", *LINES[1][1:], r0=LADDER_R0),
+                      "r0": LADDER_R0})
+    ladder = []
+    for eps in QUICK_LADDER if quick else LADDER:
+        if not quick:
+            lines.append({**_line(root, eps, "prolate", *LINES[1][1:], r0=LADDER_R0),
+                          "r0": LADDER_R0})
+        folder = run_reseed(root, source, eps, switches[0]["da0"], quick)
+        ladder.append({**describe_end(folder, eps, stability=not quick),
+                       "da0": switches[0]["da0"]})
+    return {"lines": lines, "switches": switches, "ladder": ladder}
+
+
+def main(argv=None) -> dict:
+    ap = study_parser(__doc__, OUT, quick="one short line at eps = 0.01, 10 steps of each 3D run",
+                      report_only="rewrite the report from starfish_octant.json")
+    args = ap.parse_args(argv)
+    suffix = "_quick" if args.quick else ""
+    root = args.out / f"starfish_octant{suffix}"
+    result = results(args, "starfish_octant", lambda: compute(root, args.quick))
+    if not args.report_only and not args.quick:
+        figure(result, root, args.out)
+    report(result, args.out, suffix)
+    for x in [*result["switches"], *result["ladder"]]:
+        print(f"{_start(x)}, eps = {x['eps']:g}: {x['label']} ({x['status']}), "
+              f"e = {x['e']:.4f}", flush=True)
+    return result
+
+
+if __name__ == "__main__":
+    main()
