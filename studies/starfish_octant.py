@@ -48,7 +48,7 @@ one_thread(fft=False)
 import json  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from _lib.branches import branch_rows, make_branch  # noqa: E402
+from _lib.branches import branch_rows, e_at, make_branch  # noqa: E402
 
 OUT = Path("runs") / "studies"
 V, KBAR, R0, EPS = 0.7, 1.4, 0.2, 0.01
@@ -91,14 +91,11 @@ def _line(root: Path, eps: float, branch: str, start: float, stop: float,
 
 
 def e_at_da0(line: dict | None, da0: float) -> float | None:
-    """e of an (r, z) line at Δa₀ (linear between its two points about it; None outside)."""
+    """e of an (r, z) line at Δa₀ (:func:`_lib.branches.e_at` on its (Δa₀, e) points: linear
+    between the two about it; None outside, or for a line that failed)."""
     if not line or line["failed"]:
         return None
-    pts = sorted((r["da0"], r["e"]) for r in line["rows"])
-    for (a0, e0), (a1, e1) in zip(pts, pts[1:], strict=False):
-        if a0 <= da0 <= a1:
-            return e0 + (e1 - e0) * (da0 - a0) / (a1 - a0)
-    return None
+    return e_at([(r["da0"], r["e"]) for r in line["rows"]], da0)
 
 
 def arm_geometry(grid, L: float, eps: float) -> dict:
@@ -146,7 +143,9 @@ def arm_geometry(grid, L: float, eps: float) -> dict:
 
 def _finished(folder: Path, start) -> None:
     """Run ``start()`` into ``folder`` once: a finished run (summary.json) is kept, an
-    interrupted one with its checkpoint resumed."""
+    interrupted one with its checkpoint resumed (what :func:`fem_ade.engine.jobs.ensure`
+    does for a scene's run; a switch does not continue itself, as its ``make`` would have
+    to)."""
     from fem_ade.engine.runs import resume
 
     if (folder / "summary.json").is_file():
@@ -174,28 +173,23 @@ def run_switch(root: Path, line: dict, m: int, geometry: str, da0: float,
 
 def run_reseed(root: Path, source: Path, eps: float, da0: float, quick: bool) -> Path:
     """The run from ``source``'s end at ε = ``eps`` (the same v, Δa₀, R₀; the octant at the
-    switch's order and nodes per ε), to a steady state as the switch's flows."""
-    from fem_ade.campaigns.switch import (
-        OCTANT_NODES_PER_EPS,
-        OCTANT_ORDER,
-        UNTIL_STEADY,
-        default_nodes,
-    )
-    from fem_ade.cli.run import main as run_main
+    switch's order and nodes per ε), to a steady state as the switch's flows
+    (:func:`fem_ade.engine.jobs.ensure`: a finished run kept, an interrupted one resumed)."""
+    from fem_ade.campaigns.switch import OCTANT_ORDER, UNTIL_STEADY, octant_nodes
+    from fem_ade.engine.jobs import ensure
+    from fem_ade.engine.runs import recipe
+    from fem_ade.scenes.catalogue import vesicle_scene
 
     folder = root / f"reseeded-m4-eps={eps:g}"
-    n = default_nodes(eps, 1.0, 2 * OCTANT_ORDER, OCTANT_NODES_PER_EPS)
-    args = ["vesicle", "--branch", "oblate", "--v", str(V), "--da0", repr(da0), "--kbar",
-            str(KBAR), "--eps", str(eps), "--R0", str(R0), "--geometry", "octant", "--order",
-            str(OCTANT_ORDER),
-            "--n", str(n), "--phi0", str(source), "--recipe", "steady", "--until-steady",
-            str(UNTIL_STEADY), "--checkpoint-every", "200", "--quiet", "--out", str(folder)]
-
-    def start():
-        if run_main([*args, *(["--max-steps", str(QUICK_STEPS)] if quick else [])]) != 0:
-            raise RuntimeError(f"fem_ade.run {' '.join(args)} failed")
-
-    _finished(folder, start)
+    # seeded on the oblate (the prolate's seed does not fit the box at ε = 0.02); the scene
+    # and options given as they are, so that a finished folder is checked against them
+    scene = vesicle_scene(v=V, da0=da0, kbar=KBAR, eps=eps, R0=R0, branch="oblate")
+    options = {**recipe("steady", scene), "until_steady": UNTIL_STEADY, "backend": "fem",
+               "n": octant_nodes(scene.params, OCTANT_ORDER),
+               "checkpoint_every": 200,
+               "backend_options": {"order": OCTANT_ORDER, "geometry": "octant"},
+               **({"max_steps": QUICK_STEPS} if quick else {})}
+    ensure(folder, scene, options=options, after=source).check()
     return folder
 
 
