@@ -218,6 +218,23 @@ def test_phi0_run_resumes_after_its_start_moved(tmp_path, cli):
     assert (out / "initial.npz").is_file()
 
 
+def test_phi0_run_folder_moves_and_still_resumes(tmp_path, cli):
+    """A run records its own start relative to its folder: the folder moved elsewhere
+    resumes bit for bit (its run.json names ``initial.npz``, no absolute path)."""
+    src, out, whole = tmp_path / "S", tmp_path / "R", tmp_path / "W"
+    assert cli([*SHORT, "--steps", "5", "--out", src]).returncode == 0
+    assert cli([*SHORT, "--steps", "10", "--checkpoint-every", "10", "--phi0", src, "--out",
+                out]).returncode == 0
+    assert cli([*SHORT, "--steps", "20", "--phi0", src, "--out", whole]).returncode == 0
+    assert json.loads((out / "run.json").read_text())["scene"]["ic"]["path"] == "initial.npz"
+    moved = tmp_path / "elsewhere" / "R2"
+    moved.parent.mkdir()
+    out.rename(moved)
+    r = cli(["--resume", moved, "--steps", "20", "--quiet"])
+    assert r.returncode == 0, r.stderr
+    same_run(whole, moved)
+
+
 # --- crashes and signals --------------------------------------------------------------------
 def test_sigkill_keeps_the_series_and_resumes_bit_for_bit(tmp_path, cli):
     """SIGKILL at any moment: the series' index lists whole files only (the steps saved so

@@ -45,6 +45,10 @@ from fem_ade.store.output import (
     write_fields,
 )
 
+#: the start field a run keeps in its folder, recorded in run.json relative to the folder
+#: (a moved folder still reads and resumes)
+KEPT_START = "initial.npz"
+
 
 def recipe(name: str, scene: Scene) -> dict:
     """The :func:`simulate` keyword arguments of a recipe (:data:`fem_ade.registry.RECIPES`)
@@ -125,8 +129,8 @@ def simulate(
     lock = prepare_out_dir(out, force=force, fresh=fresh)  # ours until the run ends
     try:
         if initial is not None:  # the start field is kept with the run
-            write_fields(out / "initial.npz", initial)
-            scene = scene.with_(ic=FieldIC(path=str((out / "initial.npz").resolve()),
+            write_fields(out / KEPT_START, initial)
+            scene = scene.with_(ic=FieldIC(path=KEPT_START, base=str(out.resolve()),
                                            grid=initial.get("phi_grid", initial.get("phi"))))
         return execute(out, scene, config, quiet=quiet, monitor=monitor, be=be)
     finally:
@@ -326,7 +330,9 @@ def read_run(out: str | Path, doing: str = "read") -> tuple[Scene, RunConfig]:
         data = read_json(out / "run.json")
         if not isinstance(data, dict) or "scene" not in data:
             raise KeyError("scene")
-        scene = scene_from_mapping(data["scene"], where=str(out / "run.json"))
+        own = (data["scene"].get("ic") or {}).get("path") == KEPT_START  # the folder's
+        scene = scene_from_mapping(data["scene"], where=str(out / "run.json"),
+                                   files=str(out.resolve()) if own else "")
         config = RunConfig.from_mapping({k: v for k, v in data.items() if k != "scene"})
     except ModelError as err:
         raise ModelError(f"cannot {doing} {out}: {err}") from None

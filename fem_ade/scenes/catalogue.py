@@ -26,7 +26,7 @@ import numpy as np
 
 from fem_ade.model.params import EFFECTS, PARAM_FIELDS, ModelError, Params
 from fem_ade.registry import IC_VARIANTS
-from fem_ade.scenes.initial import KINDS, Ellipsoid, Shape, Sphere
+from fem_ade.scenes.initial import KINDS, Ellipsoid, FieldIC, Shape, Sphere
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -343,9 +343,11 @@ _WHAT = {"vec": "a list of numbers", "vecs": "a list of lists of numbers",
          "bool": "true or false", "str": "a string"}
 
 
-def ic_from_mapping(table: dict, dim: int) -> Shape:
+def ic_from_mapping(table: dict, dim: int, files: str = "") -> Shape:
     """An initial condition from the ``[ic]`` table of a scene file; ModelError (one line)
-    for an unknown kind, an unknown, missing or ill-typed field, or a value that does not fit."""
+    for an unknown kind, an unknown, missing or ill-typed field, or a value that does not fit.
+    ``files``: the folder a relative ``path`` of a field (kind "file") is read from (default:
+    the working directory)."""
     table = dict(table)
     kind = table.pop("kind", None)
     if kind not in KINDS:
@@ -365,7 +367,7 @@ def ic_from_mapping(table: dict, dim: int) -> Shape:
     if missing:
         raise ModelError(f"ic kind {kind!r} needs {', '.join('ic.' + k for k in missing)}")
     values = {k: _parse(k, spec[k], v) for k, v in table.items()}
-    ic = cls(**values)
+    ic = cls(**values, base=files) if cls is FieldIC and files else cls(**values)
     ic.check(dim)
     return ic
 
@@ -418,8 +420,10 @@ def load_scene_file(path: str | Path) -> Scene:
     return scene_from_mapping(data, default_name=path.stem, where=str(path))
 
 
-def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = "scene") -> Scene:
-    """Build a scene from the mapping of a TOML scene file (see :func:`load_scene_file`)."""
+def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = "scene",
+                       files: str = "") -> Scene:
+    """Build a scene from the mapping of a TOML scene file (see :func:`load_scene_file`);
+    ``files`` as :func:`ic_from_mapping`'s."""
     data = dict(data)
     path = where
     base = data.pop("base", None)
@@ -464,7 +468,7 @@ def scene_from_mapping(data: dict, *, default_name: str = "scene", where: str = 
     base_scene = (vesicle_scene(**(vesicle_t or {})) if base == "vesicle" else
                   get_scene(base) if base is not None else None)
     dim = scene_kw.get("dim", base_scene.dim if base_scene else 3)
-    ic = ic_from_mapping(ic_t, dim) if ic_t is not None else None
+    ic = ic_from_mapping(ic_t, dim, files) if ic_t is not None else None
 
     if base_scene is not None:
         scene = base_scene

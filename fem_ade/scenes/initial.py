@@ -46,6 +46,7 @@ scene file.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, fields
 from typing import ClassVar
 
@@ -519,13 +520,25 @@ class FieldIC(Shape):
     """φ of an earlier run (``path``) or an array (``grid``), resampled to the new points.
     The field of an axisymmetric run (its (r, z) nodes and axis, :func:`load_meridian_field`)
     is a surface of revolution about that axis: it is evaluated from its nodes, in either
-    geometry."""
+    geometry.
+
+    ``base``: the folder a relative ``path`` is read from (not part of the scene: a run
+    records its own start as ``initial.npz``, relative to its folder, so the folder can be
+    moved; :func:`fem_ade.engine.runs.read_run` gives the folder)."""
 
     kind: ClassVar[str] = "file"
     spec: ClassVar[dict] = {"path": "str"}
     is_field: ClassVar[bool] = True
     path: str = ""
     grid: np.ndarray | None = field(default=None, compare=False, repr=False)
+    base: str = field(default="", compare=False, repr=False)
+
+    @property
+    def file(self) -> str:
+        """The path to read: ``path``, under ``base`` if it is relative and a base is set."""
+        if self.base and not os.path.isabs(self.path):
+            return os.path.join(self.base, self.path)
+        return self.path
 
     def check(self, dim):
         grid = self.values()
@@ -533,11 +546,11 @@ class FieldIC(Shape):
             raise ModelError(f"the initial field is {grid.ndim}D, the scene is {dim}D")
 
     def values(self) -> np.ndarray:
-        return self.grid if self.grid is not None else load_grid_field(self.path)
+        return self.grid if self.grid is not None else load_grid_field(self.file)
 
     def meridian(self) -> dict | None:
         """The (r, z) field of an axisymmetric run's file, or None."""
-        return load_meridian_field(self.path) if self.path else None
+        return load_meridian_field(self.file) if self.path else None
 
     def axis_of_revolution(self):
         m = self.meridian()
