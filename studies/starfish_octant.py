@@ -23,7 +23,10 @@ at 2.56 nodes per ε was beyond that session. A four-armed shape has the mirrors
 Each end: its label, genus, arms, symmetry, its arms' width and thickness in units of ε
 (:func:`arm_geometry`), e beside the (r, z) discocyte's and prolate's at its Δa₀, and on the
 octant the m = 4 ends' stability in the sector (perturbations even in x, y and z: a lower
-bound on the 3D count; Newton's polish first, ``fem_ade.stability``).
+bound on the 3D count; Newton's polish first, ``fem_ade.stability``). **The directions**
+(:func:`directions`): at ε = 0.02 the end's three lowest sector eigenvectors, their parity
+under x ↔ y and their shape at the membrane, and where the flow from the end kicked along
+each goes (which way the saddle leads, and a kick that should return).
 
 **Hypothesis**: the m = 4 rim mode leads to a four-armed starfish that is a steady state of
 the model at ε = 0.01, with arms many ε wide (so not the phase field's pinching); it is
@@ -69,6 +72,9 @@ LADDER_R0 = 0.15
 QUICK_LADDER = (0.02,)
 #: the quick mode's meshes (nodes per L) and steps: the plumbing only
 QUICK_N, QUICK_STEPS = 128, 10
+#: the starfish's directions: its sector's lowest eigenvectors at this ε of the ladder (the
+#: cheapest end), and the flows from the end kicked along each by KICK (max |v| = 1)
+DIRECTIONS_EPS, DIRECTIONS, KICK = 0.02, 3, 0.1
 
 
 def _line(root: Path, eps: float, branch: str, start: float, stop: float,
@@ -234,6 +240,71 @@ def describe_end(folder: Path, eps: float, stability: bool) -> dict:
     return out
 
 
+def directions(root: Path, folder: Path, quick: bool) -> list[dict]:
+    """The end's :data:`DIRECTIONS` lowest sector eigenvectors (after Newton's polish): each
+    one's parity under x ↔ y (a mirror of the D4h starfish, its arms along x and y: odd is
+    B1, two opposite arms against the other two; even is A1, all four alike), its mean at
+    the membrane (|φ| < 0.9) in the mid-plane at θ = 0°, 45°, 90° (the arms' tips, the
+    neck, the other arms), and where the flow from the end kicked by :data:`KICK` along it
+    goes (the end's own run, from the kicked field; kept, resumed:
+    :func:`fem_ade.engine.jobs.ensure`)."""
+    from dataclasses import fields
+
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    from fem_ade.campaigns.stability import cartesian, load_state, polish
+    from fem_ade.engine.config import RunConfig
+    from fem_ade.engine.jobs import ensure
+    from fem_ade.engine.runs import read_run
+
+    kept = folder / "directions.json"
+    if kept.is_file():
+        return json.loads(kept.read_text())
+    be, _ = load_state(folder)
+    if not quick:
+        polish(be)
+    st = cartesian(be, k=DIRECTIONS, vectors=True)
+    X = np.asarray(be.space.doflocs).T
+    swap = cKDTree(X).query(X[:, [1, 0, 2]])[1]
+    phi0 = be.phi.copy()
+    scene, config = read_run(folder)
+    options = {f.name: getattr(config, f.name) for f in fields(RunConfig)}
+    rows = []
+    for j, lam in enumerate(st.eigenvalues):
+        v = st.vectors[:, j] / np.max(np.abs(st.vectors[:, j]))
+        minus, plus = np.linalg.norm(v - v[swap]), np.linalg.norm(v + v[swap])
+        odd = minus > plus
+        be._set(phi0 + KICK * v, None)
+        start = root / f"kick-{j}-eps={DIRECTIONS_EPS:g}.npz"
+        np.savez(start, phi_grid=np.asarray(be.grid_phi()))
+        run = root / f"kicked-{j}-eps={DIRECTIONS_EPS:g}"
+        ensure(run, scene, options={**options, "phi0": str(start)}).check()
+        end = describe_end(run, DIRECTIONS_EPS, stability=False)
+        rows.append({"j": j, "eigenvalue": float(lam), "parity": "B1" if odd else "A1",
+                     "mixed": float(min(minus, plus) / max(minus, plus)),
+                     "at_membrane": _at_membrane(X, phi0, v, be.params.L),
+                     "end": end})
+    be._set(phi0, None)
+    kept.write_text(json.dumps(rows, indent=1) + "\n")
+    return rows
+
+
+def _at_membrane(X, phi, v, L: float) -> dict:
+    """v's mean at the membrane (|φ| < 0.9) in the mid-plane z = L/2, in wedges of ±4° about
+    θ = 0°, 45°, 90° (about the box's centre)."""
+    import numpy as np
+
+    c = L / 2
+    mid = (np.abs(X[:, 2] - c) < 1e-9) & (np.abs(phi) < 0.9)
+    theta = np.degrees(np.arctan2(X[mid, 1] - c, X[mid, 0] - c))
+    out = {}
+    for a in (0, 45, 90):
+        near = np.abs(theta - a) < 4
+        out[str(a)] = float(np.mean(v[mid][near])) if near.any() else None
+    return out
+
+
 def figure(result: dict, root: Path, out: Path) -> Path | None:
     """The ends' 3D views (each run's shape.png, its left half), one panel each."""
     import matplotlib
@@ -335,7 +406,30 @@ def report(result: dict, out: Path, suffix: str) -> None:
                           e_at_da0(by.get(("prolate", x["eps"])), x["da0"])))
     if not suffix and (out / "starfish_octant-shapes.png").is_file():
         lines += ["", "![the ends](starfish_octant-shapes.png)"]
+    lines += _directions_table(result.get("directions") or [])
     write_report(out, f"starfish_octant{suffix}", lines)
+
+
+def _directions_table(rows: list[dict]) -> list[str]:
+    if not rows:
+        return []
+    out = ["", f"The starfish's directions at ε = {DIRECTIONS_EPS:g} (the reseeded end, Newton's "
+           "polish first): its sector's lowest eigenvectors v (max |v| = 1), each one's parity "
+           "under x ↔ y (the arms lie along x and y; B1: odd, two opposite arms against the "
+           "other two; A1: even, all four alike), v's mean at the membrane in the mid-plane at "
+           "θ = 0° and 90° (arms) and 45° (neck), and the flow from the end kicked by "
+           f"{KICK:g} v (the end's own run, to a steady state or its cap):", "",
+           "| v | λ | parity | at 0° / 45° / 90° | kicked flow's end | e | e − e(end) |",
+           "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        at, end = r["at_membrane"], r["end"]
+        where = " / ".join("—" if at[a] is None else f"{at[a]:+.2f}" for a in ("0", "45", "90"))
+        e0 = r.get("e_start")
+        diff = "—" if e0 is None else f"{end['e'] - e0:+.1e}"
+        out.append(f"| {r['j']} | {r['eigenvalue']:.2e} | {r['parity']} | {where} | "
+                   f"{end['label']}, {end['symmetry']} ({end['status']}, {end['steps']} steps,"
+                   f" {end['cpu_s']:.0f} s) | {end['e']:.5f} | {diff} |")
+    return out
 
 
 def compute(root: Path, quick: bool) -> dict:
@@ -361,7 +455,9 @@ def compute(root: Path, quick: bool) -> dict:
         folder = run_reseed(root, source, eps, switches[0]["da0"], quick)
         ladder.append({**describe_end(folder, eps, stability=not quick),
                        "da0": switches[0]["da0"]})
-    return {"lines": lines, "switches": switches, "ladder": ladder}
+    x = next(x for x in ladder if x["eps"] == DIRECTIONS_EPS)
+    dirs = [{**r, "e_start": x["e"]} for r in directions(root, root / x["folder"], quick)]
+    return {"lines": lines, "switches": switches, "ladder": ladder, "directions": dirs}
 
 
 def main(argv=None) -> dict:

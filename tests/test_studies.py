@@ -587,6 +587,16 @@ def check_starfish_octant(result, out):
     assert study.e_at_da0(line, 9.0) is None
     text = (out / "starfish_octant_quick.md").read_text()
     assert text.count("| m = 4 | 0.01 |") == 1 and text.count("| reseeded | 0.02 |") == 1
+    # the reseeded end's three lowest sector eigenvectors, each kicked and run 10 steps
+    dirs = result["directions"]
+    assert [r["j"] for r in dirs] == [0, 1, 2]
+    lams = [r["eigenvalue"] for r in dirs]
+    assert lams == sorted(lams) and all(map(math.isfinite, lams))
+    for r in dirs:
+        assert r["parity"] in ("A1", "B1") and 0 <= r["mixed"] <= 1
+        assert (r["end"]["status"], r["end"]["steps"], r["end"]["n"]) == ("max_steps", 10, 96)
+        assert math.isfinite(r["end"]["e"]) and r["end"]["genus"] == [0]
+    assert text.count("kicked flow's end") == 1 and text.count(" steps, ") >= 5
 
 
 ARGS = {"readme_figure": ["--steps", "2", "--n", "24"], "ade_azimuthal": ["--quick", "--refine"]}

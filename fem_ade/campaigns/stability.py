@@ -84,6 +84,8 @@ class Stability:
     eigenvalues: list = field(default_factory=list)
     unstable_3d: int = 0
     seconds: dict = field(default_factory=dict)
+    #: a 3D state's eigenvectors (columns, at the FEM's nodes) when asked for
+    vectors: np.ndarray | None = field(default=None, repr=False)
 
     def lowest(self, m: int) -> float | None:
         values = self.modes.get(m)
@@ -129,13 +131,15 @@ def axisymmetric(be, modes=range(MODES + 1), k: int = EIGENVALUES,
 
 
 def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
-              tol: float = 1e-9, ncv: int = ARNOLDI_VECTORS) -> Stability:
+              tol: float = 1e-9, ncv: int = ARNOLDI_VECTORS,
+              vectors: bool = False) -> Stability:
     """The ``k`` lowest eigenvalues of H_L v = λ P v of a 3D FEM state on {Cᵀv = 0}, C the
     constraints' gradients and P times each rigid motion (a negligible one — a rotation
     about a state's axis of symmetry — left out): ARPACK (regular mode, P⁻¹ by the fast
     diagonalization) on ΠᵀH_LΠ + σ_c C(CᵀP⁻¹C)⁻¹Cᵀ, Π the P-orthogonal projector on the
     tangent space (the directions off it moved to σ_c = :data:`OFF_TANGENT`), with ``ncv``
-    Lanczos vectors (:data:`ARNOLDI_VECTORS`)."""
+    Lanczos vectors (:data:`ARNOLDI_VECTORS`); ``vectors``: keep the eigenvectors too
+    (``Stability.vectors``, P-normalised, in the order of the eigenvalues)."""
     import time
 
     from scipy.sparse.linalg import LinearOperator, eigsh
@@ -164,12 +168,14 @@ def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
 
     ops = [LinearOperator((N, N), matvec=f, dtype=float)
            for f in (H, P, lambda x: sys_.P_inverse(np.ravel(x)))]
-    vals = eigsh(ops[0], k=k, M=ops[1], Minv=ops[2], which="SA", tol=tol,
-                 ncv=min(N - 1, max(2 * k + 1, ncv)), return_eigenvectors=False,
-                 v0=np.ones(N))
-    vals = np.sort(vals)
+    found = eigsh(ops[0], k=k, M=ops[1], Minv=ops[2], which="SA", tol=tol,
+                  ncv=min(N - 1, max(2 * k + 1, ncv)), return_eigenvectors=vectors,
+                  v0=np.ones(N))
+    vals, vecs = found if vectors else (found, None)
+    order = np.argsort(vals)
+    vals = vals[order]
     out = Stability("octant" if getattr(be, "geometry", "") == "octant" else "cartesian",
-                    eigenvalues=list(vals),
+                    eigenvalues=list(vals), vectors=None if vecs is None else vecs[:, order],
                     unstable_3d=int(np.sum(vals < (threshold(be.params) if below is None
                                                    else below))))
     out.seconds["all"] = round(time.perf_counter() - t0, 3)
