@@ -99,19 +99,15 @@ def run_3d(job: tuple) -> str | None:
     """One octant run (``job``: the point's branch folder, the run folder, δ); None, or why
     not. A finished run is kept, an interrupted one resumed from its checkpoint."""
     from fem_ade.campaigns.switch import switch
-    from fem_ade.engine.runs import resume
     from fem_ade.model.params import ModelError
 
     branch, run, delta = job
     summary = run / "summary.json"
     if summary.is_file() and json.loads(summary.read_text())["status"] != "interrupted":
-        return None
-    try:
-        if (run / "checkpoint.npz").is_file():
-            resume(run, steps=MAX_STEPS)
-        else:
-            switch(branch, None, run, mode=2, point=0, delta=delta, geometry="octant",
-                   quiet=True, max_steps=MAX_STEPS)
+        return None  # ended: kept without making the start again
+    try:  # a new run, or the interrupted one resumed (switch continues its own folder)
+        switch(branch, None, run, mode=2, point=0, delta=delta, geometry="octant",
+               quiet=True, max_steps=MAX_STEPS)
     except ModelError as err:
         return str(err)
     return None

@@ -147,21 +147,6 @@ def arm_geometry(grid, L: float, eps: float) -> dict:
             "tip_over_neck": tip / neck if neck > 0 else None}
 
 
-def _finished(folder: Path, start) -> None:
-    """Run ``start()`` into ``folder`` once: a finished run (summary.json) is kept, an
-    interrupted one with its checkpoint resumed (what :func:`fem_ade.engine.jobs.ensure`
-    does for a scene's run; a switch does not continue itself, as its ``make`` would have
-    to)."""
-    from fem_ade.engine.runs import resume
-
-    if (folder / "summary.json").is_file():
-        return
-    if (folder / "checkpoint.npz").is_file():
-        resume(folder)
-    else:
-        start()
-
-
 def run_switch(root: Path, line: dict, m: int, geometry: str, da0: float,
                quick: bool) -> tuple[Path, int]:
     """The flow from the discocyte's point nearest ``da0`` along block m: (its run folder,
@@ -172,8 +157,8 @@ def run_switch(root: Path, line: dict, m: int, geometry: str, da0: float,
     k = min(range(len(rows)), key=lambda i: abs(rows[i]["da0"] - da0))
     folder = root / f"switched-m{m}-eps={line['eps']:g}"
     kw = {"n": QUICK_N, "max_steps": QUICK_STEPS} if quick else {}
-    _finished(folder, lambda: switch(line["folder"], None, folder, point=k, mode=m,
-                                     quiet=True, geometry=geometry, **kw))
+    # a finished flow is kept, an interrupted one resumed (switch continues its own folder)
+    switch(line["folder"], None, folder, point=k, mode=m, quiet=True, geometry=geometry, **kw)
     return folder, k
 
 

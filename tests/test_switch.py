@@ -101,6 +101,28 @@ def test_a_switch_is_an_ordinary_run_folder(oblate, tmp_path, capsys):
     assert json.loads((out / "summary.json").read_text())["steps"] == 40
 
 
+def test_a_switch_goes_on_in_its_own_folder(oblate, tmp_path, capsys):
+    """The same switch into the same folder again: an ended run is returned as it is
+    (nothing runs), one capped below a new --max-steps goes on from its checkpoint, bit for
+    bit the run made at once; another switch (another δ) is refused in one line."""
+    out, whole = tmp_path / "switched", tmp_path / "whole"
+    common = [str(oblate), "--n", "32", "--checkpoint-every", "10", "--quiet"]
+    assert switch_main([*common, "--out", str(out), "--max-steps", "20"]) == 0
+    first = (out / "summary.json").read_text()
+    assert switch_main([*common, "--out", str(out), "--max-steps", "20"]) == 0
+    assert (out / "summary.json").read_text() == first  # not run again
+    assert switch_main([*common, "--out", str(out), "--max-steps", "30"]) == 0
+    assert switch_main([*common, "--out", str(whole), "--max-steps", "30"]) == 0
+    capsys.readouterr()
+    went_on, made = (json.loads((f / "summary.json").read_text()) for f in (out, whole))
+    assert went_on["steps"] == made["steps"] == 30
+    assert went_on["final"] == made["final"]
+    assert switch_main([*common, "--out", str(out), "--max-steps", "30", "--delta",
+                        "0.2"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "holds another run (scene.description" in err, err
+
+
 @pytest.mark.parametrize("args, message", [
     (["--bifurcation", "3"], "has bifurcations 0 … 0, not 3"),
     (["--point", "4"], "has no negative eigenvalue"),

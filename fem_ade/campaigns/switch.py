@@ -196,7 +196,9 @@ def switch(branch: str | Path, index: int | None, out: str | Path, *, delta: flo
     ``mode`` with ``point`` (and no ``index``): switch along that block at that point, a
     point unstable in it with no bifurcation on the branch (unstable all along).
     ``geometry="octant"``: on the mirror-symmetric eighth of the box (module docstring;
-    ``order`` None: :data:`OCTANT_ORDER`)."""
+    ``order`` None: :data:`OCTANT_ORDER`). A folder that holds this very switch already
+    is continued, not refused: an ended run is returned as it is, an interrupted one
+    resumed (so a study or a second call after a kill goes on where it stopped)."""
     from fem_ade.engine.runs import recipe, simulate
     from fem_ade.scenes.catalogue import Scene
     from fem_ade.scenes.initial import FieldIC
@@ -240,5 +242,37 @@ def switch(branch: str | Path, index: int | None, out: str | Path, *, delta: flo
               "backend_options": options}
         if max_steps is not None:
             kw["max_steps"] = max_steps
-        result = simulate(scene, out=out, **kw)
+        result = _continued(Path(out), scene, kw, max_steps, quiet)
+        if result is None:
+            result = simulate(scene, out=out, **kw)
     return result, origin
+
+
+def _continued(out: Path, scene, kw: dict, max_steps: int | None, quiet: bool):
+    """The result of this very switch in ``out`` if it holds one: an ended run as it ended
+    (nothing runs); an interrupted one, or one stopped at a cap below ``max_steps``,
+    resumed from its checkpoint (to ``max_steps`` if given); None for a folder with no run
+    in it. ModelError if it holds another run (the scene, the description — the branch,
+    point, m, δ — and every choice a resume must match,
+    :func:`fem_ade.engine.jobs.holds_another`)."""
+    from fem_ade.engine.jobs import holds_another, read_summary
+    from fem_ade.engine.loop import RunResult
+    from fem_ade.engine.runs import resume
+    from fem_ade.store.status import ENDED, Status
+
+    if not (out / "run.json").is_file():
+        return None
+    other = holds_another(out, scene, kw)
+    if other:
+        raise ModelError(f"{out}: {other}")
+    s = read_summary(out)
+    more = (s is not None and s.get("status") == Status.MAX_STEPS and max_steps is not None
+            and max_steps > s.get("steps", max_steps))  # capped below what is asked now
+    if s is not None and s.get("status") in ENDED and not more:
+        return RunResult(status=s["status"], steps=s["steps"], t=s["t"], final=s["final"],
+                         message=s.get("message", ""), wall_s=s.get("wall_s", 0.0),
+                         shape=s.get("shape"), cpu_s=s.get("cpu_s", 0.0))
+    if not (out / "checkpoint.npz").is_file():
+        raise ModelError(f"{out} holds this switch's run, interrupted before its first "
+                         "checkpoint: remove the folder to run it anew")
+    return resume(out, steps=max_steps, quiet=quiet)

@@ -139,7 +139,7 @@ def ensure(folder: str | Path, scene=None, *, options: dict | Callable | None = 
     while True:
         summary = read_summary(folder)
         if summary is not None and summary.get("status") in ENDED:
-            other = _holds_another(folder, scene, options, after)
+            other = holds_another(folder, scene, options, after)
             if other:
                 return Outcome(folder, Status.FAILED, summary, other,
                                time.perf_counter() - t0)
@@ -168,7 +168,7 @@ def ensure(folder: str | Path, scene=None, *, options: dict | Callable | None = 
         return Outcome(folder, status, summary, reason, time.perf_counter() - t0, ran=True)
 
 
-def _holds_another(folder: Path, scene, options, after) -> str:
+def holds_another(folder: Path, scene, options, after=None) -> str:
     """Why an ended folder's run is not the one asked for ('' when it is, or when that
     cannot be told here): its run.json against the run ``simulate(scene, **options)`` would
     make — the scene as run and every choice a resume must match
