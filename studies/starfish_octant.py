@@ -14,8 +14,10 @@ at 2.56 nodes per ε was beyond that session. A four-armed shape has the mirrors
   (``ade_limit.md``).
 - **The switches** (``fem_ade.switch --point I --mode m``): from the discocyte at Δa₀ = 1.6,
   where its blocks m = 4, 3, 2 are unstable (−1.5e-4, −1.1e-4, −4.9e-5), the flow from
-  φ + 0.1 ψ_m cos mθ for m = 4 and m = 2 on the octant (order 8, 1.92 nodes per ε). An
-  m = 3 shape has no mirror pair x, y: it needs the box (not run here; see the notes).
+  φ + 0.1 ψ_m cos mθ for m = 4 and m = 2 on the octant (order 8, 1.92 nodes per ε); for
+  m = 3 on the box (no mirror pair x, y; 128³ nodes of order 4) from Δa₀ = 1.36, and for
+  m = 6 on the octant from a second discocyte line (Δa₀ 1.55 … 1.84, blocks m ≤ 6) at
+  1.72, each capped where the flow was stopped (:data:`M3_STEPS`, :data:`M6_STEPS`).
 - **The ε ladder**: the m = 4 flow's end reseeded at ε = 0.02 and 0.014 (the same v, Δa₀,
   R₀; the octant at 1.92 nodes per ε), each run to its steady state, beside the (r, z)
   prolate at that ε/R₀ (:data:`LADDER_R0`: at R₀ = 0.2 it does not fit the unit box).
@@ -38,7 +40,7 @@ Writes ``OUT/starfish_octant.md`` (with the hand-written ``OUT/starfish_octant_n
 ``.json`` and ``starfish_octant-shapes.png`` (the ends, rendered); the branch and run
 folders in ``OUT/starfish_octant/`` (not committed; each run resumes from its checkpoint).
 
-    python studies/starfish_octant.py --out studies/results   # ~2.5 h on one core
+    python studies/starfish_octant.py --out studies/results   # ~4.5 h on one core
     python studies/starfish_octant.py --quick                 # a short line, 10 steps, ~40 s
 """
 
@@ -60,9 +62,19 @@ LINES = (("oblate", 1.0, 1.6, 0.05), ("prolate", 1.3, 1.7, 0.05))
 QUICK_LINES = (("oblate", 1.45, 1.46, 0.01),)
 #: the switches: (m, geometry, the discocyte's Δa₀ to start from (its nearest point), the
 #: end's stability or not: the sector's at 97³ unknowns took 13 min beside two other runs,
-#: and m = 2's end is the control, its e the point)
-SWITCHES = ((4, "octant", 1.6, True), (2, "octant", 1.6, False))
-QUICK_SWITCHES = ((4, "octant", 1.45, False),)
+#: and m = 2's end is the control, its e the point; a cap on the steps or None). The caps:
+#: where this session stopped the m = 3 flow (the box, ~1 s a step) and the m = 6 one,
+#: which had left along m = 2 by then (the notes)
+M3_STEPS, M6_STEPS = 3200, 2521
+#: the quick mode's meshes (nodes per L) and steps: the plumbing only
+QUICK_N, QUICK_STEPS = 128, 10
+SWITCHES = ((4, "octant", 1.6, True, None), (2, "octant", 1.6, False, None),
+            (3, "cartesian", 1.36, False, M3_STEPS), (6, "octant", 1.72, False, M6_STEPS))
+QUICK_SWITCHES = ((4, "octant", 1.45, False, QUICK_STEPS),)
+#: the discocyte past Δa₀ = 1.6 with its blocks up to m = 6 (m = 6 opens at 1.64): the line
+#: the m = 6 switch starts from (m = 6, even, has the octant's mirrors with θ₀ = 0); m = 3
+#: needs the box (128³ nodes of order 4: its end's stability, 2M unknowns, not computed)
+M6_LINE, M6_MODES = ("oblate", 1.55, 1.75, 0.05), 6
 #: the ε ladder: the m = 4 end reseeded at these ε (octant, 1.92 nodes per ε)
 LADDER = (0.02, 0.014)
 #: the ladder's (r, z) prolate: at R₀ = 0.2 it does not fit the unit box at ε = 0.014 and
@@ -70,28 +82,29 @@ LADDER = (0.02, 0.014)
 #: scaled by it (the same ε/R₀; L/R₀ 6.7 instead of 5)
 LADDER_R0 = 0.15
 QUICK_LADDER = (0.02,)
-#: the quick mode's meshes (nodes per L) and steps: the plumbing only
-QUICK_N, QUICK_STEPS = 128, 10
 #: the starfish's directions: its sector's lowest eigenvectors at this ε of the ladder (the
 #: cheapest end), and the flows from the end kicked along each by KICK (max |v| = 1)
 DIRECTIONS_EPS, DIRECTIONS, KICK = 0.02, 3, 0.1
 
 
 def _line(root: Path, eps: float, branch: str, start: float, stop: float,
-          step: float, r0: float = R0) -> dict:
+          step: float, r0: float = R0, modes: int = 4) -> dict:
     """One (r, z) line at (V, ``eps``) of radius ``r0`` (its ``eps`` in the study's units,
-    ε·R₀/r0 in the run's): its folder and rows (ModelError's line if none)."""
-    name = "discocyte" if branch == "oblate" else branch
+    ε·R₀/r0 in the run's), its blocks m ≤ ``modes``: its folder and rows (ModelError's line
+    if none)."""
+    name = ("discocyte" if branch == "oblate" else branch) + ("" if modes == 4 else
+                                                               f"-m{modes}")
     run_eps = round(eps * r0 / R0, 10)
     made = make_branch(root / (f"{name}-v={V:g}-eps={eps:g}"
                                + ("" if r0 == R0 else f"-R0={r0:g}")),
                        ["vesicle", "--branch", branch, "--v", str(V), "--kbar", str(KBAR),
                         "--eps", str(run_eps), "--R0", str(r0), "--param", "da0", "--from",
-                        str(start), "--to", str(stop), "--step", str(step), "--modes", "4"])
+                        str(start), "--to", str(stop), "--step", str(step), "--modes",
+                        str(modes)])
     if isinstance(made, str):
         return {"branch": branch, "eps": eps, "failed": made}
     rows = [{"da0": float(r["da0"]), "e": float(r["e"]), "label": r["label"],
-             "lowest": [float(f"{float(r[f'lowest_m{m}']):.3g}") for m in range(5)],
+             "lowest": [float(f"{float(r[f'lowest_m{m}']):.3g}") for m in range(modes + 1)],
              "unstable_3d": int(r["unstable_3d"])} for r in branch_rows(made)]
     return {"branch": branch, "eps": eps, "failed": None, "folder": str(made), "rows": rows}
 
@@ -148,15 +161,17 @@ def arm_geometry(grid, L: float, eps: float) -> dict:
 
 
 def run_switch(root: Path, line: dict, m: int, geometry: str, da0: float,
-               quick: bool) -> tuple[Path, int]:
-    """The flow from the discocyte's point nearest ``da0`` along block m: (its run folder,
-    the point)."""
+               quick: bool, cap: int | None = None) -> tuple[Path, int]:
+    """The flow from the discocyte's point nearest ``da0`` along block m, to ``cap`` steps
+    at most: (its run folder, the point)."""
     from fem_ade.campaigns.switch import switch
 
     rows = line["rows"]
     k = min(range(len(rows)), key=lambda i: abs(rows[i]["da0"] - da0))
     folder = root / f"switched-m{m}-eps={line['eps']:g}"
-    kw = {"n": QUICK_N, "max_steps": QUICK_STEPS} if quick else {}
+    kw = {"n": QUICK_N} if quick else {}
+    if cap is not None:
+        kw["max_steps"] = cap
     # a finished flow is kept, an interrupted one resumed (switch continues its own folder)
     switch(line["folder"], None, folder, point=k, mode=m, quiet=True, geometry=geometry, **kw)
     return folder, k
@@ -349,16 +364,16 @@ def _row(x: dict, disc: float | None, prolate: float | None) -> str:
 
 
 def _lines_table(result: dict) -> list[str]:
-    out = ["| branch | ε | R₀ | Δa₀ | end | first point unstable in m = 2 | m = 3 | m = 4 |",
-           "|---|---|---|---|---|---|---|---|"]
+    out = ["| branch | ε | R₀ | Δa₀ | end | first point unstable in m = 2 | m = 3 | m = 4 | "
+           "m = 6 |", "|---|---|---|---|---|---|---|---|---|"]
     for x in result["lines"]:
         if x["failed"]:
             out.append(f"| {x['branch']} | {x['eps']:g} | {x.get('r0', R0):g} | — | "
-                       f"{x['failed']} | | | |")
+                       f"{x['failed']} | | | | |")
             continue
         rows = x["rows"]
         first = [next((f"{r['da0']:.3f}" for r in rows if r["lowest"][m] < 0), "stable")
-                 for m in (2, 3, 4)]
+                 if m < len(rows[0]["lowest"]) else "—" for m in (2, 3, 4, 6)]
         out.append(f"| {x['branch']} | {x['eps']:g} | {x.get('r0', R0):g} | "
                    f"{rows[0]['da0']:.3f}–{rows[-1]['da0']:.3f}"
                    f" | {rows[-1]['label']} | " + " | ".join(first) + " |")
@@ -382,13 +397,16 @@ def report(result: dict, out: Path, suffix: str) -> None:
              "| start | ε | Δa₀ | mesh | end | shape | arms | width/ε | arm thickness/ε | "
              "centre thickness/ε | e | e discocyte | e prolate | stability |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    by = {}  # per (branch, ε): R₀'s line where there is one, else the ladder's
-    for x in sorted(result["lines"], key=lambda x: x.get("r0", R0) == R0):
-        if not x["failed"]:
-            by[(x["branch"], x["eps"])] = x
+    def e_of(branch, x):  # R₀'s lines first, then the ladder's: the first that holds Δa₀
+        for line in sorted(result["lines"], key=lambda y: y.get("r0", R0) != R0):
+            if not line["failed"] and (line["branch"], line["eps"]) == (branch, x["eps"]):
+                e = e_at_da0(line, x["da0"])
+                if e is not None:
+                    return e
+        return None
+
     for x in [*result["switches"], *result["ladder"]]:
-        lines.append(_row(x, e_at_da0(by.get(("oblate", x["eps"])), x["da0"]),
-                          e_at_da0(by.get(("prolate", x["eps"])), x["da0"])))
+        lines.append(_row(x, e_of("oblate", x), e_of("prolate", x)))
     if not suffix and (out / "starfish_octant-shapes.png").is_file():
         lines += ["", "![the ends](starfish_octant-shapes.png)"]
     lines += _directions_table(result.get("directions") or [])
@@ -423,11 +441,14 @@ def compute(root: Path, quick: bool) -> dict:
     disc = lines[0]
     if disc["failed"]:
         return {"lines": lines, "switches": [], "ladder": []}
+    if not quick:
+        lines.append(_line(root, EPS, *M6_LINE, modes=M6_MODES))
     switches = []
-    for m, geometry, da0, stability in QUICK_SWITCHES if quick else SWITCHES:
-        folder, k = run_switch(root, disc, m, geometry, da0, quick)
+    for m, geometry, da0, stability, cap in QUICK_SWITCHES if quick else SWITCHES:
+        line = lines[-1] if m > 4 else disc
+        folder, k = run_switch(root, line, m, geometry, da0, quick, cap)
         end = describe_end(folder, EPS, stability)
-        switches.append({**end, "m": m, "point": k, "da0": disc["rows"][k]["da0"]})
+        switches.append({**end, "m": m, "point": k, "da0": line["rows"][k]["da0"]})
     source = root / switches[0]["folder"]
     if not quick:  # the control of the ladder's smaller R₀ (L/R₀ 6.7): at ε = 0.01 beside R₀'s
         lines.append({**_line(root, EPS, "prolate", *LINES[1][1:], r0=LADDER_R0),
