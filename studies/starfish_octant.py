@@ -285,7 +285,6 @@ def directions(root: Path, folder: Path, quick: bool) -> list[dict]:
                      "mixed": float(min(minus, plus) / max(minus, plus)),
                      "at_membrane": _at_membrane(X, phi0, v, be.params.L),
                      "end": end})
-    be._set(phi0, None)
     kept.write_text(json.dumps(rows, indent=1) + "\n")
     return rows
 
@@ -384,7 +383,8 @@ def report(result: dict, out: Path, suffix: str) -> None:
     lines = ["# Where the discocyte's rim modes lead at v = 0.7: starfish on the octant", "",
              "Written by `studies/starfish_octant.py` (its docstring says what it runs). "
              f"v = {V:g}, κ̄/κ = {KBAR:g}, R₀ = {R0:g}. The (r, z) lines (order 8, 2.5 nodes "
-             "per ε, blocks m ≤ 4; a block's first unstable point on the line):", "",
+             "per ε, blocks m ≤ 4, on the second discocyte line m ≤ 6; a block's first unstable "
+             "point on the line):", "",
              *_lines_table(result), "",
              "The 3D ends: the flow from the discocyte's point at Δa₀ along block m (switch), "
              "or from the m = 4 end at another ε (reseeded), to a steady state (E changing by "
@@ -441,11 +441,12 @@ def compute(root: Path, quick: bool) -> dict:
     disc = lines[0]
     if disc["failed"]:
         return {"lines": lines, "switches": [], "ladder": []}
-    if not quick:
-        lines.append(_line(root, EPS, *M6_LINE, modes=M6_MODES))
+    wide = None if quick else _line(root, EPS, *M6_LINE, modes=M6_MODES)  # blocks to m = 6
+    if wide is not None:
+        lines.append(wide)
     switches = []
     for m, geometry, da0, stability, cap in QUICK_SWITCHES if quick else SWITCHES:
-        line = lines[-1] if m > 4 else disc
+        line = wide if m > 4 else disc
         folder, k = run_switch(root, line, m, geometry, da0, quick, cap)
         end = describe_end(folder, EPS, stability)
         switches.append({**end, "m": m, "point": k, "da0": line["rows"][k]["da0"]})
