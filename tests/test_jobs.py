@@ -67,6 +67,26 @@ def test_a_killed_run_is_resumed_to_the_uninterrupted_one(tmp_path):
     assert done.summary["final"]["E"] == whole.summary["final"]["E"]
 
 
+def test_an_interrupted_folder_of_another_run_is_not_resumed(tmp_path):
+    """An interrupted folder is resumed only as the run it holds: asked for with another n,
+    ensure gives ``failed`` naming n, runs nothing and changes no file; asked for as itself,
+    it resumes (the last stop's note: ensure resumed whatever an interrupted folder held)."""
+    def kill(backend, row):
+        if row["step"] >= 10:
+            raise KeyboardInterrupt
+
+    folder, killing = tmp_path / "a", dict(OPTIONS, steps=20, monitor=kill, shape_every=5)
+    assert ensure(folder, SCENE, options=killing).status == Status.INTERRUPTED
+    files = {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+    other = ensure(folder, SCENE, options=dict(killing, n=24), restart=True)
+    assert other.status == Status.FAILED and not other.ran
+    assert "holds another run" in other.reason and "n" in other.reason
+    assert {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()} == files
+    assert not failure_record(folder).exists()
+    done = ensure(folder, SCENE, options=killing)
+    assert done.ran and done.status == Status.COMPLETED and done.summary["steps"] == 20
+
+
 def test_a_run_from_another_runs_end(tmp_path):
     first = ensure(tmp_path / "first", SCENE, options=dict(OPTIONS, steps=10)).summary
     then = ensure(tmp_path / "then", SCENE, options=dict(OPTIONS, steps=5),

@@ -9,6 +9,9 @@ another process owns, or record why it failed" is written once:
 * a folder with a checkpoint and run.json is **resumed** (bit for bit the run that was
   interrupted); one that cannot be resumed (a checkpoint of an older version) is refused,
   or started again with ``restart=True``;
+* a folder, ended or interrupted, that holds **another run** (another scene, or a choice a
+  resume must match: :func:`holds_another`) gives :attr:`Status.FAILED` with the field that
+  differs: nothing runs, nothing in it changes (``restart`` does not override this);
 * otherwise the run **starts** (``simulate`` into the folder, or the job's own ``make``, e.g.
   following a branch); ``after=FOLDER`` starts it from that run's end (a kick, a
   continuation);
@@ -44,6 +47,9 @@ from fem_ade.store.status import ENDED, Status
 #: the errors that are a run's failure (recorded with their reason), not a bug of the caller:
 #: ModelError (a ValueError), FloatingPointError and Newton's NewtonError (ArithmeticErrors)
 RUN_ERRORS = (ValueError, ArithmeticError)
+#: holds_another's words for a folder whose run.json cannot be read as a run's (an older
+#: version's): the one difference ``restart=True`` may start again over
+UNCOMPARABLE = "cannot be compared"
 #: how often a waiting job looks at a busy folder again (seconds)
 WAIT_POLL_S = 2.0
 
@@ -138,11 +144,13 @@ def ensure(folder: str | Path, scene=None, *, options: dict | Callable | None = 
     failed = failure_record(folder)
     while True:
         summary = read_summary(folder)
-        if summary is not None and summary.get("status") in ENDED:
+        ended = summary is not None and summary.get("status") in ENDED
+        if ended or _resumable(folder):  # never skip to, or resume, another run
             other = holds_another(folder, scene, options, after)
-            if other:
+            if other and not (restart and not ended and UNCOMPARABLE in other):
                 return Outcome(folder, Status.FAILED, summary, other,
                                time.perf_counter() - t0)
+        if ended:
             return Outcome(folder, summary["status"], summary,
                            seconds=time.perf_counter() - t0)
         if failed.is_file() and not retry_failed:
@@ -186,7 +194,7 @@ def holds_another(folder: Path, scene, options, after=None) -> str:
         asked = planned_identity(scene, options)
         held = folder_identity(folder)
     except (ModelError, TypeError) as err:
-        return f"the folder holds a run that cannot be compared with the one asked for ({err})"
+        return f"the folder holds a run that {UNCOMPARABLE} with the one asked for ({err})"
     if after is not None or options.get("phi0") is not None:
         for identity in (asked, held):
             identity["scene"].pop("ic", None)
@@ -199,12 +207,17 @@ def holds_another(folder: Path, scene, options, after=None) -> str:
             "this one to run it anew")
 
 
+def _resumable(folder: Path) -> bool:
+    """The folder holds an interrupted run's checkpoint and its run.json."""
+    return (folder / "checkpoint.npz").is_file() and (folder / "run.json").is_file()
+
+
 def _run(folder: Path, scene, options: dict, make, after, quiet: bool, restart: bool):
     from fem_ade.engine.runs import resume, simulate
 
     if make is not None:
         return make(folder)
-    if (folder / "checkpoint.npz").is_file() and (folder / "run.json").is_file():
+    if _resumable(folder):
         try:
             return resume(folder, quiet=quiet)
         except ModelError as err:
