@@ -37,6 +37,7 @@ import math  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from _lib.branches import branch_rows, e_at, make_branch, three_points  # noqa: E402
+from fem_ade.campaigns.stability import count_text  # noqa: E402
 
 OUT = Path("runs") / "studies"
 #: (name, ε, R₀, the oblate branch's v from, to, step, the 3D mesh's nodes and order, the
@@ -111,7 +112,7 @@ def shapes(root: Path, c: dict, out: Path) -> Path | None:
     return three_points(
         be, root / f"d2-{c['name']}", c["rows"],
         lambda k, r: (f"point {k}: v = {r['v']:.4f}, e = {r['e']:.4f}, "
-                      f"{r['unstable_3d']} unstable in 3D"),
+                      f"{count_text(r['unstable_3d'], r['eigenvalues'])} unstable in 3D"),
         out / f"branch3d-shapes-{c['name']}.png", 64, 0.6)  # the repository's 6 MB
 
 
@@ -185,7 +186,7 @@ def report(result: dict, out: Path, suffix: str) -> None:
             lines.append(f"| {k} | {r['v']:.5f} | {r['amplitude']:.3f} | {r['e']:.5f} | "
                          f"{diff(r['e_oblate'], r)} | {diff(r['e_prolate'], r)} | "
                          f"{r['label']} | {r.get('symmetry') or '—'} | ({axes}) | {lam} | "
-                         f"{r['unstable_3d']} | "
+                         f"{count_text(r['unstable_3d'], r['eigenvalues'])} | "
                          f"{r['newton']} | {r['seconds']:.0f} |")
     lines += ["", f"![e and the semi-axes against v](branch3d{suffix}.png)"]
     for c in result["cases"]:
@@ -216,7 +217,8 @@ def main(argv=None) -> dict:
     for c in result["cases"]:
         last = c["rows"][-1]
         print(f"{c['name']}: {len(c['rows'])} points from v = {c['v_bifurcation']:.4f} to "
-              f"{last['v']:.4f} (e {last['e']:.4f}, unstable in 3D {last['unstable_3d']})",
+              f"{last['v']:.4f} (e {last['e']:.4f}, unstable in 3D "
+              f"{count_text(last['unstable_3d'], last['eigenvalues'])})",
               flush=True)
     assert all(math.isfinite(r["e"]) for c in result["cases"] for r in c["rows"])
     return result

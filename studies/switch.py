@@ -40,7 +40,7 @@ runs and their stability, timed, one after another in one process.
 
 from __future__ import annotations
 
-from _lib.cli import one_thread, study_parser
+from _lib.cli import one_thread, results, study_parser
 
 one_thread(fft=False)
 
@@ -50,6 +50,7 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from _lib.branches import branch_rows, make_branch  # noqa: E402
+from fem_ade.campaigns.stability import count_text  # noqa: E402
 
 OUT = Path("runs") / "studies"
 #: the switches: (name, ε, R₀, the oblate branch's v from, to, step, the point switched
@@ -194,7 +195,8 @@ def report(result: dict, out: Path, suffix: str) -> None:
             f"| {c['name']} (R₀ = {c['R0']:g}) | {c['n']}³, order {c['order']} | "
             f"{c['v']:.4f} | {c['oblate_e']:.5f}, {c['oblate_lowest_m2']:.3g} | "
             f"{c['label']}, ({axes}) | {c['e']:.5f} | {c['prolate_e']:.5f} | "
-            f"{c['e'] / c['prolate_e'] - 1:+.2e} | {lam} ({c['unstable_3d']} unstable) | "
+            f"{c['e'] / c['prolate_e'] - 1:+.2e} | {lam} "
+            f"({count_text(c['unstable_3d'], c['eigenvalues_3d'])} unstable) | "
             f"{c['run_cpu_s']:.0f} | {c['stability_s']:.0f} |")
     if result["stomatocyte"]:
         lines += ["", "## Control: the stomatocyte at (v, Δa₀) = (0.6, 0.8), κ̄/κ = 1.4", "",
@@ -219,7 +221,7 @@ def report(result: dict, out: Path, suffix: str) -> None:
             else:
                 lam = ", ".join(f"{x:.3g}" for x in c["eigenvalues_3d"])
                 verdict = (f"converged in {c['newton_iterations']}; {lam} "
-                           f"({c['unstable_3d']} unstable)")
+                           f"({count_text(c['unstable_3d'], c['eigenvalues_3d'])} unstable)")
             others = "; ".join(f"{k}: {o['label']}, {o['e']:.4f}"
                                for k, o in c["others"].items())
             lines.append(f"| ({c['v']:g}, {c['da0']:g}) | {c['seed']} | "
@@ -232,18 +234,22 @@ def report(result: dict, out: Path, suffix: str) -> None:
 
 
 def main(argv=None) -> dict:
-    ap = study_parser(__doc__, OUT, quick="one switch at ε = 0.04 on 32³")
+    ap = study_parser(__doc__, OUT, quick="one switch at ε = 0.04 on 32³",
+                      report_only="rewrite the report from switch.json")
     args = ap.parse_args(argv)
     suffix = "_quick" if args.quick else ""
     root = args.out / f"switch{suffix}"
-    root.mkdir(parents=True, exist_ok=True)
-    result = {"switches": [switch_case(root, c)
-                           for c in (QUICK_CASES if args.quick else CASES)],
-              "stomatocyte": [] if args.quick else [stomatocyte_case(root, e, r)
-                                                   for e, r in STOMATOCYTE],
-              "starfish": [] if args.quick else [starfish_case(root, *c) for c in STARFISH]}
-    (args.out / f"switch{suffix}.json").write_text(json.dumps(result, indent=1,
-                                                              allow_nan=False) + "\n")
+
+    def compute():
+        root.mkdir(parents=True, exist_ok=True)
+        return {"switches": [switch_case(root, c)
+                             for c in (QUICK_CASES if args.quick else CASES)],
+                "stomatocyte": [] if args.quick else [stomatocyte_case(root, e, r)
+                                                     for e, r in STOMATOCYTE],
+                "starfish": [] if args.quick else [starfish_case(root, *c)
+                                                   for c in STARFISH]}
+
+    result = results(args, "switch", compute)
     report(result, args.out, suffix)
     for c in result["switches"]:
         print(f"{c['name']}: oblate v = {c['v']:.4f} -> {c['label']} e = {c['e']:.5f} "

@@ -231,6 +231,23 @@ def test_the_m0_block_equals_the_iterative_eigensolve(prolate):
     assert np.max(np.abs(np.asarray(direct) / np.asarray(iterative) - 1)) < 1e-8
 
 
+def test_a_3d_count_is_all_the_unstable_directions_or_says_it_is_not(prolate):
+    """cartesian() asked for one eigenvalue, with a threshold between the third and the
+    fourth lowest, makes the solve again with 2k until one is above it: the count is 3 and
+    complete (before, a count equal to k was silently a lower bound: the starfish on the
+    whole box had 4 of 4). With every eigenvalue below the threshold it stops at ``most``
+    and says the count is a lower bound."""
+    _, be = prolate
+    four = cartesian(be, 4).eigenvalues
+    between = 0.5 * (four[2] + four[3])
+    grown = cartesian(be, 1, below=between)
+    assert grown.unstable_3d == 3 and grown.complete and len(grown.eigenvalues) == 4
+    assert np.allclose(grown.eigenvalues, four, rtol=1e-8)
+    capped = cartesian(be, 1, below=1e9, most=2)
+    assert capped.unstable_3d == 2 and not capped.complete
+    assert capped.as_json()["complete"] is False
+
+
 @pytest.mark.parametrize("m", [0, 1, 2, 3, 5])
 def test_the_mode_laplacian_on_bessel_modes(m):
     """W⁻¹K_m applied to J_m(kr)cos(πz) (natural ends: J_m'(kR) = 0) is (k² + π²) times it

@@ -69,5 +69,6 @@ def test_the_octants_stability_says_it_is_a_sector():
     from fem_ade.campaigns.stability import Stability
 
     assert Stability("octant", eigenvalues=[-1.0, 2.0], unstable_3d=1).as_json() == {
-        "eigenvalues": [-1.0, 2.0], "unstable_3d": 1, "sector": "mirror-symmetric (octant)"}
+        "eigenvalues": [-1.0, 2.0], "unstable_3d": 1, "complete": True,
+        "sector": "mirror-symmetric (octant)"}
     assert "sector" not in Stability("cartesian", eigenvalues=[1.0]).as_json()

@@ -726,7 +726,7 @@ REPORTS = {"constraints_study": [], "sharp_limit": [], "gallery": [], "ade_plane
            "phase_diagram": [], "branches": [], "ade_branches": [], "azimuthal": [],
            "ade_azimuthal": [], "branch3d": [], "starfish": [], "ade_limit": [],
            "ade_bifurcations": [], "ade_octant": [], "branch3d_octant": [],
-           "starfish_octant": []}
+           "starfish_octant": [], "switch": []}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)

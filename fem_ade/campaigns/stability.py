@@ -58,6 +58,9 @@ def threshold(params) -> float:
 
 #: the modes and eigenvalues per mode the command line computes by default
 MODES, EIGENVALUES = 8, 4
+#: a 3D solve whose ``k`` eigenvalues are all unstable is made again with 2k, up to this many
+#: (the starfish on the whole box had four below zero of four: the count was not all)
+MAX_EIGENVALUES = 32
 #: where the directions off the constraints' tangent space are put in the 3D operator
 OFF_TANGENT = 10.0
 #: Lanczos vectors ARPACK keeps in the 3D eigen-solve (scipy's default: max(2k + 1, 20)).
@@ -86,6 +89,9 @@ class Stability:
     seconds: dict = field(default_factory=dict)
     #: a 3D state's eigenvectors (columns, at the FEM's nodes) when asked for
     vectors: np.ndarray | None = field(default=None, repr=False)
+    #: False when every eigenvalue computed was unstable up to :data:`MAX_EIGENVALUES`: then
+    #: ``unstable_3d`` is a lower bound (a 3D state; the blocks count by inertia, exactly)
+    complete: bool = True
 
     def lowest(self, m: int) -> float | None:
         values = self.modes.get(m)
@@ -97,7 +103,7 @@ class Stability:
                     "unstable": {str(m): int(n) for m, n in self.unstable.items()},
                     "unstable_3d": int(self.unstable_3d)}
         out = {"eigenvalues": [float(x) for x in self.eigenvalues],
-               "unstable_3d": int(self.unstable_3d)}
+               "unstable_3d": int(self.unstable_3d), "complete": bool(self.complete)}
         if self.geometry == "octant":  # the mirror-symmetric sector's: a lower bound
             out["sector"] = "mirror-symmetric (octant)"
         return out
@@ -132,22 +138,62 @@ def axisymmetric(be, modes=range(MODES + 1), k: int = EIGENVALUES,
 
 def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
               tol: float = 1e-9, ncv: int = ARNOLDI_VECTORS,
-              vectors: bool = False) -> Stability:
+              vectors: bool = False, most: int = MAX_EIGENVALUES) -> Stability:
     """The ``k`` lowest eigenvalues of H_L v = λ P v of a 3D FEM state on {Cᵀv = 0}, C the
     constraints' gradients and P times each rigid motion (a negligible one — a rotation
     about a state's axis of symmetry — left out): ARPACK (regular mode, P⁻¹ by the fast
     diagonalization) on ΠᵀH_LΠ + σ_c C(CᵀP⁻¹C)⁻¹Cᵀ, Π the P-orthogonal projector on the
     tangent space (the directions off it moved to σ_c = :data:`OFF_TANGENT`), with ``ncv``
     Lanczos vectors (:data:`ARNOLDI_VECTORS`); ``vectors``: keep the eigenvectors too
-    (``Stability.vectors``, P-normalised, in the order of the eigenvalues)."""
+    (``Stability.vectors``, P-normalised, in the order of the eigenvalues). While all k are
+    below ``below`` (default :func:`threshold`) the solve is made again with 2k, up to
+    ``most``: the count of unstable directions is then all of them, or
+    ``Stability.complete`` is False and it is a lower bound."""
     import time
 
-    from scipy.sparse.linalg import LinearOperator, eigsh
+    from scipy.sparse.linalg import eigsh
+
+    t0 = time.perf_counter()
+    H, P, P_inverse = _tangent_operators(be)
+    N = be.phi.size
+    sigma = threshold(be.params) if below is None else below
+    while True:
+        found = eigsh(H, k=k, M=P, Minv=P_inverse, which="SA", tol=tol,
+                      ncv=min(N - 1, max(2 * k + 1, ncv)), return_eigenvectors=vectors,
+                      v0=np.ones(N))
+        vals, vecs = found if vectors else (found, None)
+        order = np.argsort(vals)
+        vals = vals[order]
+        complete = bool(vals[-1] >= sigma)
+        if complete or 2 * k > min(most, N - 2):
+            break
+        k *= 2
+    out = Stability("octant" if getattr(be, "geometry", "") == "octant" else "cartesian",
+                    eigenvalues=list(vals), vectors=None if vecs is None else vecs[:, order],
+                    unstable_3d=int(np.sum(vals < sigma)), complete=complete)
+    out.seconds["all"] = round(time.perf_counter() - t0, 3)
+    return out
+
+
+def count_text(unstable: int | None, eigenvalues=()) -> str:
+    """A 3D count of unstable directions as a table shows it: ``n``, or ``≥ n`` when every
+    eigenvalue computed (``eigenvalues``) was unstable, so that the count is a lower bound
+    (:attr:`Stability.complete` False; counts written before :func:`cartesian` asked for
+    more when all k were unstable); ``—`` for none computed."""
+    if unstable is None:
+        return "—"
+    return f"≥ {unstable}" if eigenvalues and unstable >= len(eigenvalues) else f"{unstable}"
+
+
+def _tangent_operators(be):
+    """(H, P, P⁻¹) of :func:`cartesian` as LinearOperators: the constrained Hessian projected
+    on the tangent space (the rest moved to :data:`OFF_TANGENT`), the preconditioner's P and
+    its fast-diagonalization inverse."""
+    from scipy.sparse.linalg import LinearOperator
 
     from fem_ade.backends.fem.modes import p_orthogonal, zero_modes
     from fem_ade.backends.fem.newton import NewtonSystem, linearize
 
-    t0 = time.perf_counter()
     sys_ = NewtonSystem(be)
     lin = linearize(sys_, be.phi.copy())
     step, N, P = sys_.step, be.phi.size, sys_.P
@@ -166,20 +212,8 @@ def cartesian(be, k: int = EIGENVALUES, below: float | None = None,
              + step.constraint_hessian_vector(lin.phi, lin.Kphi, y, lin.lam[0], lin.lam[1]))
         return h - C @ (G @ (Y.T @ h)) + OFF_TANGENT * (C @ (G @ (C.T @ x)))
 
-    ops = [LinearOperator((N, N), matvec=f, dtype=float)
-           for f in (H, P, lambda x: sys_.P_inverse(np.ravel(x)))]
-    found = eigsh(ops[0], k=k, M=ops[1], Minv=ops[2], which="SA", tol=tol,
-                  ncv=min(N - 1, max(2 * k + 1, ncv)), return_eigenvectors=vectors,
-                  v0=np.ones(N))
-    vals, vecs = found if vectors else (found, None)
-    order = np.argsort(vals)
-    vals = vals[order]
-    out = Stability("octant" if getattr(be, "geometry", "") == "octant" else "cartesian",
-                    eigenvalues=list(vals), vectors=None if vecs is None else vecs[:, order],
-                    unstable_3d=int(np.sum(vals < (threshold(be.params) if below is None
-                                                   else below))))
-    out.seconds["all"] = round(time.perf_counter() - t0, 3)
-    return out
+    return tuple(LinearOperator((N, N), matvec=f, dtype=float)
+                 for f in (H, P, lambda x: sys_.P_inverse(np.ravel(x))))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -331,11 +365,14 @@ def main(argv=None) -> int:
                   + f"   unstable {result.unstable[m]}" + ("" if m == 0 else " (x2 in 3D)"))
     else:
         print("  " + ", ".join(f"{x:.4g}" for x in result.eigenvalues))
+    count = (f"{result.unstable_3d}" if result.complete else
+             f"at least {result.unstable_3d} (every one of the {len(result.eigenvalues)} "
+             "computed)")
     if result.geometry == "octant":
         print(f"unstable directions even in x, y and z (the octant's; in 3D at least as "
-              f"many): {result.unstable_3d}")
+              f"many): {count}")
     else:
-        print(f"unstable directions in 3D: {result.unstable_3d}")
+        print(f"unstable directions in 3D: {count}")
     return 0
 
 

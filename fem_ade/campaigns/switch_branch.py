@@ -346,9 +346,12 @@ def _ended(rows: list[dict]) -> str | None:
 
 
 def _line(row: dict, octant: bool = False) -> str:
+    from fem_ade.campaigns.stability import count_text
+
     axes = ", ".join(f"{a:.4f}" for a in row["semi_axes"] or [])
     where = "even in x, y and z (the octant's)" if octant else "in 3D"
-    stab = "" if row.get("unstable_3d") is None else f", unstable {row['unstable_3d']} {where}"
+    stab = ("" if row.get("unstable_3d") is None else
+            f", unstable {count_text(row['unstable_3d'], row.get('eigenvalues'))} {where}")
     return (f"  v = {row['v']:.6g}: e = {row['e']:.7g}, amplitude {row['amplitude']:.4g}, "
             f"{row['label']} ({axes}){stab}, Newton {row['newton']}, {row['seconds']} s")
 
