@@ -28,7 +28,9 @@ octant the m = 4 ends' stability in the sector (perturbations even in x, y and z
 bound on the 3D count; Newton's polish first, ``fem_ade.stability``). **The directions**
 (:func:`directions`): at ε = 0.02 the end's three lowest sector eigenvectors, their parity
 under x ↔ y and their shape at the membrane, and where the flow from the end kicked along
-each goes (which way the saddle leads, and a kick that should return).
+each goes (which way the saddle leads, and a kick that should return). **The whole box**
+(:func:`box_end`): the ε = 0.02 end unfolded onto the periodic box (96³ nodes of order 8),
+run to steady there and its stability computed with no mirror imposed: the full 3D count.
 
 **Hypothesis**: the m = 4 rim mode leads to a four-armed starfish that is a steady state of
 the model at ε = 0.01, with arms many ε wide (so not the phase field's pinching); it is
@@ -54,6 +56,7 @@ import json  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from _lib.branches import branch_rows, e_at, make_branch  # noqa: E402
+from fem_ade.campaigns.stability import count_text  # noqa: E402
 
 OUT = Path("runs") / "studies"
 V, KBAR, R0, EPS = 0.7, 1.4, 0.2, 0.01
@@ -65,7 +68,7 @@ QUICK_LINES = (("oblate", 1.45, 1.46, 0.01),)
 #: and m = 2's end is the control, its e the point; a cap on the steps or None). The caps:
 #: where this session stopped the m = 3 flow (the box, ~1 s a step) and the m = 6 one,
 #: which had left along m = 2 by then (the notes)
-M3_STEPS, M6_STEPS = 3200, 2521
+M3_STEPS, M6_STEPS = 3942, 2521
 #: the quick mode's meshes (nodes per L) and steps: the plumbing only
 QUICK_N, QUICK_STEPS = 128, 10
 SWITCHES = ((4, "octant", 1.6, True, None), (2, "octant", 1.6, False, None),
@@ -177,26 +180,38 @@ def run_switch(root: Path, line: dict, m: int, geometry: str, da0: float,
     return folder, k
 
 
-def run_reseed(root: Path, source: Path, eps: float, da0: float, quick: bool) -> Path:
-    """The run from ``source``'s end at ε = ``eps`` (the same v, Δa₀, R₀; the octant at the
-    switch's order and nodes per ε), to a steady state as the switch's flows
+def run_reseed(root: Path, source: Path, eps: float, da0: float, quick: bool,
+               geometry: str = "octant") -> Path:
+    """The run from ``source``'s end at ε = ``eps`` (the same v, Δa₀, R₀; the switch's order
+    and nodes per ε, on the octant or, ``geometry="cartesian"``, the whole box: the octant's
+    field unfolded by its mirrors), to a steady state as the switch's flows
     (:func:`fem_ade.engine.jobs.ensure`: a finished run kept, an interrupted one resumed)."""
     from fem_ade.campaigns.switch import OCTANT_ORDER, UNTIL_STEADY, octant_nodes
     from fem_ade.engine.jobs import ensure
     from fem_ade.engine.runs import recipe
     from fem_ade.scenes.catalogue import vesicle_scene
 
-    folder = root / f"reseeded-m4-eps={eps:g}"
+    folder = root / (f"reseeded-m4-eps={eps:g}" if geometry == "octant"
+                     else f"boxed-m4-eps={eps:g}")
     # seeded on the oblate (the prolate's seed does not fit the box at ε = 0.02); the scene
     # and options given as they are, so that a finished folder is checked against them
     scene = vesicle_scene(v=V, da0=da0, kbar=KBAR, eps=eps, R0=R0, branch="oblate")
     options = {**recipe("steady", scene), "until_steady": UNTIL_STEADY, "backend": "fem",
                "n": octant_nodes(scene.params, OCTANT_ORDER),
                "checkpoint_every": 200,
-               "backend_options": {"order": OCTANT_ORDER, "geometry": "octant"},
+               "backend_options": {"order": OCTANT_ORDER, "geometry": geometry},
                **({"max_steps": QUICK_STEPS} if quick else {})}
     ensure(folder, scene, options=options, after=source).check()
     return folder
+
+
+def box_end(root: Path, x: dict) -> dict:
+    """The reseeded end ``x`` unfolded onto the whole box (the same nodes per L and order)
+    and run to steady there, with the box's stability: the count without the sector's
+    mirrors (885k unknowns at ε = 0.02; not in the quick mode, where it would be most of
+    the study's time)."""
+    boxed = run_reseed(root, root / x["folder"], x["eps"], x["da0"], False, "cartesian")
+    return {**describe_end(boxed, x["eps"], stability=True), "da0": x["da0"]}
 
 
 def describe_end(folder: Path, eps: float, stability: bool) -> dict:
@@ -264,7 +279,7 @@ def directions(root: Path, folder: Path, quick: bool) -> list[dict]:
     be, _ = load_state(folder)
     if not quick:
         polish(be)
-    st = cartesian(be, k=DIRECTIONS, vectors=True)
+    st = cartesian(be, k=DIRECTIONS, vectors=True, most=DIRECTIONS)
     X = np.asarray(be.space.doflocs).T
     swap = cKDTree(X).query(X[:, [1, 0, 2]])[1]
     phi0 = be.phi.copy()
@@ -334,7 +349,9 @@ def figure(result: dict, root: Path, out: Path) -> Path | None:
 
 
 def _start(x: dict) -> str:
-    return f"m = {x['m']}" if "m" in x else "reseeded"
+    if "m" in x:
+        return f"m = {x['m']}"
+    return "reseeded" if x["geometry"] == "octant" else "unfolded"
 
 
 def _stability(x: dict) -> str:
@@ -344,7 +361,7 @@ def _stability(x: dict) -> str:
     if "failed" in st:
         return st["failed"]
     sector = "sector" if x["geometry"] == "octant" else "box"
-    return (f"{st['unstable']} unstable ({sector}; lowest "
+    return (f"{count_text(st['unstable'], st['eigenvalues'])} unstable ({sector}; lowest "
             f"{', '.join(f'{v:.2g}' for v in st['eigenvalues'][:2])}; {st['seconds']:.0f} s)")
 
 
@@ -387,13 +404,16 @@ def report(result: dict, out: Path, suffix: str) -> None:
              "point on the line):", "",
              *_lines_table(result), "",
              "The 3D ends: the flow from the discocyte's point at Δa₀ along block m (switch), "
-             "or from the m = 4 end at another ε (reseeded), to a steady state (E changing by "
+             "or from the m = 4 end at another ε (reseeded), or the reseeded end at "
+             f"ε = {DIRECTIONS_EPS:g} unfolded onto the whole box by its mirrors (unfolded; "
+             "the same nodes per L and order), to a steady state (E changing by "
              "< 1e-13 per step, relative) or the step cap. Arms: on the circle halfway between "
              "the necks and the tips in the mid-plane, the arcs inside, their mean width; the "
              "arm's and the centre's thickness along z; in units of ε. e beside the (r, z) "
              "discocyte's and prolate's at the same Δa₀ and ε (the difference in brackets). "
-             "The sector's stability: perturbations even in x, y and z (a lower bound on the "
-             "3D count), after Newton's polish; CPU: the flow's, one BLAS thread.", "",
+             "The stability after Newton's polish: the sector's (perturbations even in x, y "
+             "and z: a lower bound on the 3D count) or the box's (every perturbation, the "
+             "rigid motions projected out); CPU: the flow's, one BLAS thread.", "",
              "| start | ε | Δa₀ | mesh | end | shape | arms | width/ε | arm thickness/ε | "
              "centre thickness/ε | e | e discocyte | e prolate | stability |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -405,7 +425,7 @@ def report(result: dict, out: Path, suffix: str) -> None:
                     return e
         return None
 
-    for x in [*result["switches"], *result["ladder"]]:
+    for x in [*result["switches"], *result["ladder"], *result.get("box", [])]:
         lines.append(_row(x, e_of("oblate", x), e_of("prolate", x)))
     if not suffix and (out / "starfish_octant-shapes.png").is_file():
         lines += ["", "![the ends](starfish_octant-shapes.png)"]
@@ -464,7 +484,10 @@ def compute(root: Path, quick: bool) -> dict:
                        "da0": switches[0]["da0"]})
     x = next(x for x in ladder if x["eps"] == DIRECTIONS_EPS)
     dirs = [{**r, "e_start": x["e"]} for r in directions(root, root / x["folder"], quick)]
-    return {"lines": lines, "switches": switches, "ladder": ladder, "directions": dirs}
+    # the same end unfolded onto the whole box: its stability without the sector's mirrors
+    box = [] if quick else [box_end(root, x)]
+    return {"lines": lines, "switches": switches, "ladder": ladder, "box": box,
+            "directions": dirs}
 
 
 def main(argv=None) -> dict:
@@ -477,7 +500,7 @@ def main(argv=None) -> dict:
     if not args.report_only and not args.quick:
         figure(result, root, args.out)
     report(result, args.out, suffix)
-    for x in [*result["switches"], *result["ladder"]]:
+    for x in [*result["switches"], *result["ladder"], *result.get("box", [])]:
         print(f"{_start(x)}, eps = {x['eps']:g}: {x['label']} ({x['status']}), "
               f"e = {x['e']:.4f}", flush=True)
     return result
