@@ -348,6 +348,11 @@ def figure(result: dict, root: Path, out: Path) -> Path | None:
     return path
 
 
+def _ends(result: dict) -> list[dict]:
+    """The 3D ends of the report's table, in its order: the switches, the ladder, the box."""
+    return [*result["switches"], *result["ladder"], *result.get("box", [])]
+
+
 def _start(x: dict) -> str:
     if "m" in x:
         return f"m = {x['m']}"
@@ -425,7 +430,7 @@ def report(result: dict, out: Path, suffix: str) -> None:
                     return e
         return None
 
-    for x in [*result["switches"], *result["ladder"], *result.get("box", [])]:
+    for x in _ends(result):
         lines.append(_row(x, e_of("oblate", x), e_of("prolate", x)))
     if not suffix and (out / "starfish_octant-shapes.png").is_file():
         lines += ["", "![the ends](starfish_octant-shapes.png)"]
@@ -500,7 +505,7 @@ def main(argv=None) -> dict:
     if not args.report_only and not args.quick:
         figure(result, root, args.out)
     report(result, args.out, suffix)
-    for x in [*result["switches"], *result["ladder"], *result.get("box", [])]:
+    for x in _ends(result):
         print(f"{_start(x)}, eps = {x['eps']:g}: {x['label']} ({x['status']}), "
               f"e = {x['e']:.4f}", flush=True)
     return result

@@ -47,9 +47,6 @@ from fem_ade.store.status import ENDED, Status
 #: the errors that are a run's failure (recorded with their reason), not a bug of the caller:
 #: ModelError (a ValueError), FloatingPointError and Newton's NewtonError (ArithmeticErrors)
 RUN_ERRORS = (ValueError, ArithmeticError)
-#: holds_another's words for a folder whose run.json cannot be read as a run's (an older
-#: version's): the one difference ``restart=True`` may start again over
-UNCOMPARABLE = "cannot be compared"
 #: how often a waiting job looks at a busy folder again (seconds)
 WAIT_POLL_S = 2.0
 
@@ -146,8 +143,10 @@ def ensure(folder: str | Path, scene=None, *, options: dict | Callable | None = 
         summary = read_summary(folder)
         ended = summary is not None and summary.get("status") in ENDED
         if ended or _resumable(folder):  # never skip to, or resume, another run
-            other = holds_another(folder, scene, options, after)
-            if other and not (restart and not ended and UNCOMPARABLE in other):
+            # restart=True starts an interrupted folder again over a run.json it cannot read
+            other = holds_another(folder, scene, options, after,
+                                  unreadable_ok=restart and not ended)
+            if other:
                 return Outcome(folder, Status.FAILED, summary, other,
                                time.perf_counter() - t0)
         if ended:
@@ -176,14 +175,17 @@ def ensure(folder: str | Path, scene=None, *, options: dict | Callable | None = 
         return Outcome(folder, status, summary, reason, time.perf_counter() - t0, ran=True)
 
 
-def holds_another(folder: Path, scene, options, after=None) -> str:
-    """Why an ended folder's run is not the one asked for ('' when it is, or when that
-    cannot be told here): its run.json against the run ``simulate(scene, **options)`` would
-    make — the scene as run and every choice a resume must match
-    (:func:`fem_ade.engine.folder.run_identity`); with a start field (``after``, ``phi0``) the
-    initial condition is that field's, not compared. A ``make`` job, or a scene or options
-    given as functions (made only when a run starts), are the caller's to check: a sweep
-    compares each point's NAME.point.json (:func:`fem_ade.campaigns.sweep_points.changed`)."""
+def holds_another(folder: Path, scene, options, after=None, *,
+                  unreadable_ok: bool = False) -> str:
+    """Why a folder's run (ended or interrupted) is not the one asked for ('' when it is, or
+    when that cannot be told here; with ``unreadable_ok`` also when the two cannot be
+    compared, e.g. an older version's run.json): its run.json against the run
+    ``simulate(scene, **options)`` would make — the scene as run and every choice a resume
+    must match (:func:`fem_ade.engine.folder.run_identity`); with a start field (``after``,
+    ``phi0``) the initial condition is that field's, not compared. A ``make`` job, or a
+    scene or options given as functions (made only when a run starts), are the caller's to
+    check: a sweep compares each point's NAME.point.json
+    (:func:`fem_ade.campaigns.sweep_points.changed`)."""
     if scene is None or callable(scene) or callable(options):
         return ""
     from fem_ade.engine.folder import identity_difference
@@ -194,7 +196,9 @@ def holds_another(folder: Path, scene, options, after=None) -> str:
         asked = planned_identity(scene, options)
         held = folder_identity(folder)
     except (ModelError, TypeError) as err:
-        return f"the folder holds a run that {UNCOMPARABLE} with the one asked for ({err})"
+        if unreadable_ok:
+            return ""
+        return f"the folder holds a run that cannot be compared with the one asked for ({err})"
     if after is not None or options.get("phi0") is not None:
         for identity in (asked, held):
             identity["scene"].pop("ic", None)
