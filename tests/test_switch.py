@@ -318,3 +318,41 @@ def test_the_octant_follows_the_same_branch(oblate, tmp_path, capsys):
         assert eighth["e"] == pytest.approx(box["e"], rel=1e-8)
         assert eighth["amplitude"] == pytest.approx(box["amplitude"], abs=1e-8)
         assert eighth["unstable_3d"] >= 1  # the branch leaves the oblate's saddle
+
+
+def test_a_branch_in_da0_is_followed_in_da0(tmp_path, capsys):
+    """The 3D branch is followed in the parameter of the branch it left: from the m = 2
+    bifurcation of an ADE oblate followed in Δa₀ at v = 0.8 (κ̄/κ = 1.4, ε = 0.04), on the
+    octant, its points keep v and move Δa₀ (branch.csv's column, ended.json's parameter, the
+    line printed), hold the mode's amplitude at 0.1 and 0.2 and are steady states at their
+    Δa₀."""
+    from fem_ade.campaigns.branch_folder import load_points, read_branch_table
+    from fem_ade.campaigns.continuation import Continuation
+    from fem_ade.campaigns.switch_branch import switched_start
+
+    axi = tmp_path / "oblate-da0"
+    assert branch_main(["vesicle", "--branch", "oblate", "--eps", "0.04", "--R0", "0.25",
+                        "--v", "0.8", "--kbar", "1.4", "--param", "da0", "--from", "0.85",
+                        "--to", "1.15", "--step", "0.05", "--modes", "3", "--quiet",
+                        "--out", str(axi)]) == 0
+    bif = json.loads((axi / "bifurcations.json").read_text())["bifurcations"][0]
+    assert bif["m"] == 2  # near Δa₀ = 1.066
+    out = tmp_path / "d2"
+    assert switch_main([str(axi), "--follow", "3", "--n", "32", "--order", "8",
+                        "--geometry", "octant", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "  da0 = " in said
+    assert json.loads((out / "branch.json").read_text())["param"] == "da0"
+    assert json.loads((out / "ended.json").read_text())["param"] == "da0"
+    rows = read_branch_table(out)
+    assert [r["amplitude"] for r in rows[:2]] == pytest.approx([0.1, 0.2], abs=1e-9)
+    assert all(r["v"] == pytest.approx(0.8, abs=1e-12) for r in rows)
+    da0 = [r["da0"] for r in rows]
+    assert len(set(da0)) == 3 and all(abs(d - bif["da0"]) < 0.2 for d in da0)
+    _, be, _ = switched_start(axi, 0, None, None, 32, 8, "octant")
+    for row, phi in load_points(out):
+        be._set(phi, None)
+        Continuation(be, "da0").set_p(row["da0"])
+        sys_ = NewtonSystem(be)
+        lin = linearize(sys_, be.phi)
+        assert np.linalg.norm(lin.grad) < 1e-5 * np.linalg.norm(sys_.gradient(be.phi))

@@ -29,6 +29,10 @@ the phase of the mode is 0: cos mθ with θ from the mesh's x axis, so that the 
 mirror planes are the mesh's (a phase in between would leave the rotation's pin a nonzero
 multiplier on the cubic mesh, which turns the branch's shapes).
 
+**The parameter** is the one the axisymmetric branch was followed in (its branch.json's
+``param``): v for the minimal model's lines, Δa₀ (``da0``) at fixed v for the ADE plane's,
+whose m = 2 branch between the oblate and the prolate crosses the plane at constant v.
+
 **The mesh.** 2.56 nodes per ε by default (:data:`NODES_PER_EPS`), order 8: measured from the
 minimal model's oblate at ε = 0.04 (its m = 2 bifurcation at v = 0.8246 in the (r, z)
 geometry), the branch on 64³ nodes of order 8 starts at v = 0.8240 and goes down in v as the
@@ -129,19 +133,34 @@ def switched_start(branch, index, point, mode, n, order, geometry: str = "cartes
     mode_only = {**fields, "phi": np.zeros_like(fields["phi"]),
                  "azimuthal_phase": np.array(0.0)}
     psi = meridian_values(mode_only, np.asarray(be.space.doflocs)).ravel()
+    param = branch_parameter(branch)
     origin = {"branch": str(Path(branch).resolve()),
               "bifurcation": None if mode is not None else (index or 0), "m": m,
-              "point": folder.name,
-              "eigenvalue": lam, "v_bifurcation": bif.get("v")}
+              "point": folder.name, "param": param,
+              "eigenvalue": lam, "at_bifurcation": bif.get(param)}
     return origin, be, psi / np.max(np.abs(psi))
 
 
-def _continuation(be, psi):
-    """The extended system on ``be`` (at φ₀) with the pins of φ₀ + ψ̂ and θ = 1/⟨ψ̂, ψ̂⟩."""
+def branch_parameter(branch: str | Path) -> str:
+    """The parameter a branch folder was followed in (its branch.json's ``param``: v, da0,
+    …), which the 3D branch that leaves it is followed in too."""
+    from fem_ade.store.output import read_json
+
+    path = Path(branch) / "branch.json"
+    try:
+        return str(read_json(path)["param"])
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise ModelError(f"{path} is not a branch's branch.json ({type(err).__name__})") \
+            from None
+
+
+def _continuation(be, psi, param: str = "v"):
+    """The extended system on ``be`` (at φ₀) along ``param`` with the pins of φ₀ + ψ̂ and
+    θ = 1/⟨ψ̂, ψ̂⟩."""
     from fem_ade.backends.fem.modes import p_orthogonal, rigid_motions
     from fem_ade.campaigns.continuation import Continuation
 
-    cont = Continuation(be, "v")
+    cont = Continuation(be, param)
     if getattr(be, "geometry", "cartesian") != "octant":  # the octant's mirrors: no pins
         cont.sys.translations = p_orthogonal(cont.sys.P, rigid_motions(be, be.phi + psi))
     cont.theta = 1.0 / cont.inner(psi, psi)
@@ -151,9 +170,10 @@ def _continuation(be, psi):
 def _row(be, cont, psi, phi0, newton: int, t0: float, stability: bool) -> dict:
     from fem_ade.analysis.shape import symmetry_group
     from fem_ade.analysis.sharp import reduced_energy
+    from fem_ade.scenes.vesicle import get_parameter
 
     t1 = time.perf_counter()
-    row = {"v": cont.p, "newton": newton}
+    row = {"v": get_parameter(be.params, "v"), cont.name: cont.p, "newton": newton}
     if stability:
         from fem_ade.campaigns.stability import cartesian
 
@@ -204,24 +224,25 @@ def follow_switched(branch: str | Path, index: int | None, out: str | Path, *,
     try:
         tag = identity_digest(open_folder(out, identity))
         phi0 = be.phi.copy()
-        cont = _continuation(be, psi)
+        cont = _continuation(be, psi, origin["param"])
         anchor = (phi0, cont.p)
-        done = load_points(out, tag, phi0.size, "v")
+        param = origin["param"]
+        done = load_points(out, tag, phi0.size, param)
         rows = [r for r, _ in done]
-        why = _ended(rows) if rows else None  # a branch that ended stays ended
+        why = _ended(rows, param) if rows else None  # a branch that ended stays ended
         ds = rows[-1]["ds_next"] if rows else step
         while why is None and len(rows) < points:
             t0 = time.perf_counter()
             corrected, used = _advance(cont, done, anchor, psi, step, ds)
             if corrected is None:
-                why = (f"the branch ends at v = {cont.p:.6g}: Newton does not converge at "
+                why = (f"the branch ends at {param} = {cont.p:.6g}: Newton does not converge at "
                        f"an arclength step of {step / 8:.3g}")
                 break
             ds = _add_point(out, tag, cont, done, corrected, used, (phi0, psi), step, ds,
                             stability, t0)
             rows.append(done[-1][0])
-            say(_line(rows[-1], geometry == "octant"))
-            if (why := _ended(rows)) is not None:
+            say(_line(rows[-1], geometry == "octant", param))
+            if (why := _ended(rows, param)) is not None:
                 break
         if not rows:
             failed = (f"{why.replace('the branch ends', 'no first point')}: try a finer "
@@ -230,7 +251,7 @@ def follow_switched(branch: str | Path, index: int | None, out: str | Path, *,
             failed = None
             why = why or f"{points} points"
             say(why)
-            write_ended(out, "v", rows, why)
+            write_ended(out, param, rows, why)
             draw(out, rows, origin)
     finally:
         lock.release()
@@ -260,7 +281,7 @@ def _identity(origin: dict, be, step: float, order: int, stability: bool) -> dic
 
     identity = {"switched_from": {k: origin[k] for k in ("branch", "bifurcation", "m",
                                                          "point")},
-                "params": be.params.as_dict(), "param": "v", "step": step, "n": be.n,
+                "params": be.params.as_dict(), "param": origin["param"], "step": step, "n": be.n,
                 "order": order, "stability": bool(stability), "format": RUN_FORMAT}
     if getattr(be, "geometry", "cartesian") == "octant":  # the box's folders keep their digest
         identity["geometry"] = "octant"
@@ -284,7 +305,7 @@ def _add_point(out: Path, tag: str, cont, done: list, corrected, used: float, ba
     row["ds_next"] = ds
     row = save_point(out, len(rows), cont.be, row, tag)
     done.append((row, phi.copy()))
-    _write_table(out, [*rows, row])
+    _write_table(out, [*rows, row], cont.name)
     return ds
 
 
@@ -310,7 +331,7 @@ def _advance(cont, done: list, anchor: tuple, psi, step: float, ds: float):
             return twice, step
         delta = step / 2
         while delta >= step / 8:
-            corrected = cont.correct(phi1 + delta * tangent[0], row["v"], anchor, tangent,
+            corrected = cont.correct(phi1 + delta * tangent[0], row[cont.name], anchor, tangent,
                                      row["amplitude"] + delta)
             if corrected is not None:
                 return corrected, delta
@@ -318,54 +339,57 @@ def _advance(cont, done: list, anchor: tuple, psi, step: float, ds: float):
         return None, delta
     last_row, phi_k = done[-1]
     cont.be._set(phi_k, None)
-    cont.set_p(last_row["v"])
-    return cont.advance([(ph, r["v"]) for r, ph in done[-3:]], None, ds, step / 8)
+    cont.set_p(last_row[cont.name])
+    return cont.advance([(ph, r[cont.name]) for r, ph in done[-3:]], None, ds, step / 8)
 
 
-def _ended(rows: list[dict]) -> str | None:
+def _ended(rows: list[dict], param: str = "v") -> str | None:
     """Why the branch ends at its last point: a topology change, or at an axisymmetric
     state — the one it left (the mode's amplitude below :data:`REJOINED` of its largest) or
     another (its symmetry one of :data:`AXISYMMETRIC` after an earlier point's was not: the
     first points, a small amplitude off the revolved state, may pass the symmetry's
-    tolerance); None where it goes on."""
+    tolerance); None where it goes on. ``param``: the parameter the branch is followed in."""
     from fem_ade.campaigns.branch_analysis import same_topology
 
     row = rows[-1]
+    at = f"{param} = {row[param]:.6g}"
     if not same_topology(rows[0]["label"], row["label"]):
-        return f"the branch ends at v = {row['v']:.6g}: its shape became a {row['label']}"
+        return f"the branch ends at {at}: its shape became a {row['label']}"
     largest = max(abs(r["amplitude"]) for r in rows)
     if len(rows) > 2 and abs(row["amplitude"]) < REJOINED * largest:
-        return (f"the branch rejoins an axisymmetric one at v = {row['v']:.6g} (its mode's "
+        return (f"the branch rejoins an axisymmetric one at {at} (its mode's "
                 f"amplitude {row['amplitude']:.3g})")
     earlier = [r.get("symmetry") for r in rows[:-1]]
     if row.get("symmetry") in AXISYMMETRIC and any(g and g not in AXISYMMETRIC
                                                    for g in earlier):
         return (f"the branch reaches an axisymmetric shape ({row['symmetry']}, about another "
-                f"axis) at v = {row['v']:.6g}")
+                f"axis) at {at}")
     return None
 
 
-def _line(row: dict, octant: bool = False) -> str:
+def _line(row: dict, octant: bool = False, param: str = "v") -> str:
     from fem_ade.campaigns.stability import count_text
 
     axes = ", ".join(f"{a:.4f}" for a in row["semi_axes"] or [])
     where = "even in x, y and z (the octant's)" if octant else "in 3D"
     stab = ("" if row.get("unstable_3d") is None else
             f", unstable {count_text(row['unstable_3d'], row.get('eigenvalues'))} {where}")
-    return (f"  v = {row['v']:.6g}: e = {row['e']:.7g}, amplitude {row['amplitude']:.4g}, "
+    return (f"  {param} = {row[param]:.6g}: e = {row['e']:.7g}, amplitude {row['amplitude']:.4g}, "
             f"{row['label']} ({axes}){stab}, Newton {row['newton']}, {row['seconds']} s")
 
 
-def _write_table(out: Path, rows: list[dict]) -> None:
+def _write_table(out: Path, rows: list[dict], param: str = "v") -> None:
+    """branch.csv: :data:`COLUMNS`, and the parameter after v where it is another."""
     from fem_ade.store.tables import write_table
 
-    write_table(out / "branch.csv", list(COLUMNS), [{**r, "point": k} for k, r in
-                                                    enumerate(rows)])
+    columns = list(COLUMNS) if param == "v" else [*COLUMNS[:2], param, *COLUMNS[2:]]
+    write_table(out / "branch.csv", columns, [{**r, "point": k} for k, r in enumerate(rows)])
 
 
 def draw(out: Path, rows: list[dict], origin: dict) -> Path:
-    """branch3d.png: e against v of the 3D branch (its points) beside the axisymmetric
-    branch it left (that branch's branch.csv), the bifurcation marked."""
+    """branch3d.png: e against the branch's parameter (v or Δa₀) of the 3D branch (its
+    points) beside the axisymmetric branch it left (that branch's branch.csv), the
+    bifurcation marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -374,18 +398,19 @@ def draw(out: Path, rows: list[dict], origin: dict) -> Path:
     from fem_ade.campaigns.branch_folder import read_branch_table
     from fem_ade.plots.figures import save_figure
 
+    param = origin.get("param", "v")
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     try:
         axi = [r for r in read_branch_table(Path(origin["branch"])) if r.get("e") != ""]
-        ax.plot([r["v"] for r in axi], [r["e"] for r in axi], "o-", color="0.55", ms=3,
+        ax.plot([r[param] for r in axi], [r["e"] for r in axi], "o-", color="0.55", ms=3,
                 label="the axisymmetric branch it left")
     except (OSError, KeyError, ValueError):
         pass
-    ax.plot([r["v"] for r in rows], [r["e"] for r in rows], "s-", color="C3", ms=4,
+    ax.plot([r[param] for r in rows], [r["e"] for r in rows], "s-", color="C3", ms=4,
             label=f"the m = {origin['m']} branch in 3D")
-    if origin.get("v_bifurcation"):
-        ax.axvline(origin["v_bifurcation"], color="0.7", lw=0.8, ls=":")
-    ax.set_xlabel("v")
+    if origin.get("at_bifurcation"):
+        ax.axvline(origin["at_bifurcation"], color="0.7", lw=0.8, ls=":")
+    ax.set_xlabel({"v": "v", "da0": "Δa₀"}.get(param, param))
     ax.set_ylabel("e = (W + G) / W_sphere")
     ax.legend(frameon=False, fontsize=8)
     ax.set_title(f"from {Path(origin['branch']).name}, point {origin['point']}", fontsize=9)
