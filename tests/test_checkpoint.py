@@ -113,6 +113,10 @@ def test_sigint_writes_a_checkpoint_and_resumes(cli, tmp_path):
     total = k + 20
     r = cli(["--resume", out, "--steps", total, "--quiet"])
     assert r.returncode == 0, r.stderr
+    resumed = json.loads((out / "summary.json").read_text())
+    # the seconds count both sittings: the first's (to its checkpoint at the interrupt) and
+    # the resume's 20 steps (the resume's alone would be below the first's k ≥ 50 steps)
+    assert resumed["wall_s"] > summary["wall_s"] and resumed["cpu_s"] > 0.9 * summary["cpu_s"]
     r = cli([*args[:1], "--n", "24", "--steps", total, "--every", "10", "--quiet",
              "--backend", "spectral", "--no-render", "--allow-underresolved", "--out", whole])
     assert r.returncode == 0, r.stderr

@@ -23,6 +23,7 @@ above it, and this module reads no backend option either.
 from __future__ import annotations
 
 import os
+import time
 import warnings
 from pathlib import Path
 
@@ -30,7 +31,12 @@ import numpy as np
 
 from fem_ade.backends.base import Backend
 from fem_ade.engine.config import RunConfig
-from fem_ade.engine.folder import read_checkpoint, run_identity, write_checkpoint
+from fem_ade.engine.folder import (
+    checkpoint_spent,
+    read_checkpoint,
+    run_identity,
+    write_checkpoint,
+)
 from fem_ade.engine.loop import AdaptiveDt, LoopState, RunResult, run_loop
 from fem_ade.model.params import HISTORY_COLUMNS, ModelError
 from fem_ade.scenes.catalogue import Scene, scene_to_mapping
@@ -178,9 +184,16 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
                          start_ls.k if start_ls is not None else None)
         observers.append((config.shape_every, shapes.observe))
 
+    # the seconds of the sittings before this one (a resume), to the checkpoint it starts at
+    before = checkpoint_spent(out) if out is not None and start is not None else {
+        "cpu_s": 0.0, "wall_s": 0.0}
+    c0, w0 = time.process_time(), time.perf_counter()
+
     def checkpoint(ls):
+        spent = {"cpu_s": before["cpu_s"] + time.process_time() - c0,
+                 "wall_s": before["wall_s"] + time.perf_counter() - w0}
         with critical():
-            write_checkpoint(out, be, ls, identity)
+            write_checkpoint(out, be, ls, identity, spent)
 
     try:
         result = run_loop(
@@ -194,6 +207,8 @@ def _execute_run(out, scene, config, *, quiet, be, start, monitor) -> RunResult:
             writer.close()
         if shapes is not None:
             shapes.close()
+    result.cpu_s += before["cpu_s"]
+    result.wall_s += before["wall_s"]
     result.shapes = shapes.rows if shapes is not None else []
     result.setup_cpu_s = getattr(be, "setup_cpu_s", 0.0) if start is None else 0.0
     phi_grid = np.asarray(be.grid_phi())

@@ -80,17 +80,35 @@ def state_digest(state: dict, ls: LoopState) -> str:
     return h.hexdigest()
 
 
-def write_checkpoint(out: Path, backend: Backend, ls: LoopState, identity: dict) -> None:
+def write_checkpoint(out: Path, backend: Backend, ls: LoopState, identity: dict,
+                     spent: dict | None = None) -> None:
     """OUT/checkpoint.npz: the backend's state and the loop's (with momentum, its previous
     iterate), whose run it is, and the checksums of the state and of history.csv up to its
-    step (a resume checks both), atomically."""
+    step (a resume checks both), atomically. ``spent``: the loop's CPU and wall seconds up
+    to this step, summed over the run's sittings (:func:`checkpoint_spent`; a record, not
+    checksummed)."""
     state = backend.state()
     arrays = {f"state__{k}": v for k, v in state.items()}
     arrays.update({f"anchor__{k}": v for k, v in (ls.anchor or {}).items()})
     digests = {"state": state_digest(state, ls),
                "history": history_digest(out / "history.csv", ls.k)}
     write_fields(out / "checkpoint.npz", arrays, loop=json.dumps(ls.to_json()),
-                 identity=json.dumps(identity), digests=json.dumps(digests))
+                 identity=json.dumps(identity), digests=json.dumps(digests),
+                 spent=json.dumps(spent or {}))
+
+
+def checkpoint_spent(out: Path) -> dict:
+    """{"cpu_s", "wall_s"}: the loop's seconds up to OUT/checkpoint.npz's step over the
+    sittings before it (what :func:`write_checkpoint` recorded); zeros for a checkpoint
+    written before it recorded them, or none. A resumed run adds them to its own, so a
+    run's summary.json counts every sitting (to the checkpoint each one left)."""
+    zero = {"cpu_s": 0.0, "wall_s": 0.0}
+    try:
+        with np.load(out / "checkpoint.npz") as z:
+            spent = json.loads(str(z["spent"])) if "spent" in z.files else {}
+        return {k: float(spent.get(k, 0.0)) for k in zero}
+    except (OSError, ValueError, KeyError, TypeError):
+        return zero
 
 
 def read_checkpoint(out: Path) -> tuple[dict, LoopState, dict | None, dict | None]:

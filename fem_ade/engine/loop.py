@@ -122,6 +122,8 @@ class RunResult:
     t: float
     final: dict
     message: str = ""
+    #: the loop's wall time; for a resumed run, summed over its sittings (each to the
+    #: checkpoint the next one started from: fem_ade.engine.execute)
     wall_s: float = 0.0
     history: list[dict] = field(default_factory=list)
     dt: float = math.nan
@@ -131,7 +133,7 @@ class RunResult:
     restarts: int = 0
     #: φ on the uniform grid at the end (set by fem_ade.engine.execute for 3D and 2D runs)
     final_grid: object = None
-    #: the loop's CPU time (all the process' threads), beside ``wall_s``
+    #: the loop's CPU time (all the process' threads), beside ``wall_s`` and summed as it is
     cpu_s: float = 0.0
     #: the backend's set-up CPU time (set by fem_ade.engine.execute)
     setup_cpu_s: float = 0.0
