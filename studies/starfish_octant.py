@@ -88,6 +88,16 @@ QUICK_LADDER = (0.02,)
 #: the starfish's directions: its sector's lowest eigenvectors at this ε of the ladder (the
 #: cheapest end), and the flows from the end kicked along each by KICK (max |v| = 1)
 DIRECTIONS_EPS, DIRECTIONS, KICK = 0.02, 3, 0.1
+#: the box end's lowest eigenvectors characterised (:func:`box_directions`): its four
+#: unstable ones and the fifth, at −1.5e-6, just above the threshold
+BOX_DIRECTIONS = 5
+#: the characters of D4h's irreducible representations under C4 (about z), C2 (about z),
+#: σh (z), σv (x; the arms lie along x and y), σd (x ↔ y) and i, about the box's centre
+D4H = {"A1g": (1, 1, 1, 1, 1, 1), "A2g": (1, 1, 1, -1, -1, 1), "B1g": (-1, 1, 1, 1, -1, 1),
+       "B2g": (-1, 1, 1, -1, 1, 1), "Eg": (0, -2, -2, 0, 0, 2),
+       "A1u": (1, 1, -1, -1, -1, -1), "A2u": (1, 1, -1, 1, 1, -1),
+       "B1u": (-1, 1, -1, -1, 1, -1), "B2u": (-1, 1, -1, 1, -1, -1),
+       "Eu": (0, -2, 2, 0, 0, -2)}
 
 
 def _line(root: Path, eps: float, branch: str, start: float, stop: float,
@@ -304,6 +314,73 @@ def directions(root: Path, folder: Path, quick: bool) -> list[dict]:
     return rows
 
 
+def d4h_characters(X, w, V, L: float) -> list[float]:
+    """The characters of the space spanned by the columns of V (fields on the nodes X, 3 × N,
+    of a mesh symmetric about the box's centre; inner product weighted by w) under the
+    operations of :data:`D4H`: trace(G⁻¹ Vᵀ W V∘g), G = Vᵀ W V — ±1 for a one-dimensional
+    irreducible space, the irrep's character for a degenerate pair."""
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    c = L / 2.0
+    x, y, z = X - c
+    images = [(-y, x, z), (-x, -y, z), (x, y, -z), (-x, y, z), (y, x, z), (-x, -y, -z)]
+    tree = cKDTree(np.mod(X.T, L), boxsize=L)
+    G = V.T @ (w[:, None] * V)
+    out = []
+    for image in images:
+        moved = tree.query(np.mod(np.stack(image).T + c, L))[1]
+        out.append(float(np.trace(np.linalg.solve(G, V.T @ (w[:, None] * V[moved])))))
+    return out
+
+
+def irrep(chars: list[float]) -> tuple[str, float]:
+    """The irreducible representation of D4h whose characters are nearest ``chars`` (of one
+    eigenspace: :func:`d4h_characters`), and that distance (0: exactly it)."""
+    import numpy as np
+
+    name = min(D4H, key=lambda k: np.linalg.norm(np.subtract(D4H[k], chars)))
+    return name, float(np.linalg.norm(np.subtract(D4H[name], chars)))
+
+
+def box_directions(folder: Path) -> list[dict]:
+    """The box end's :data:`BOX_DIRECTIONS` lowest eigenvectors (Newton's polish first),
+    grouped into eigenspaces (eigenvalues equal to 1e-6, relative): each one's D4h irrep
+    (:func:`irrep`, its characters) and its largest cosine with a rigid motion (the
+    translations and rotations, :func:`fem_ade.backends.fem.modes.rigid_motions`, which the
+    stability projects out: a direction near one is that motion left over). Kept in
+    ``folder/directions.json`` (minutes: 885k unknowns)."""
+    import numpy as np
+
+    from fem_ade.backends.fem.modes import rigid_motions
+    from fem_ade.campaigns.stability import cartesian, load_state, polish
+
+    kept = folder / "directions.json"
+    if kept.is_file():
+        return json.loads(kept.read_text())
+    be, _ = load_state(folder)
+    polish(be)
+    st = cartesian(be, k=BOX_DIRECTIONS, vectors=True, most=BOX_DIRECTIONS)
+    X, w = np.asarray(be.space.doflocs), np.asarray(be.space.weights)
+    vals, V = np.asarray(st.eigenvalues), st.vectors
+    rigid = [r / np.sqrt(np.sum(w * r * r)) for r in rigid_motions(be, be.phi)]
+    rows, j = [], 0
+    while j < len(vals):
+        k = j + 1
+        while k < len(vals) and abs(vals[k] - vals[j]) <= 1e-6 * abs(vals[j]):
+            k += 1
+        S = V[:, j:k]
+        chars = d4h_characters(X, w, S, be.params.L)
+        Q = S @ np.linalg.cholesky(np.linalg.inv(S.T @ (w[:, None] * S)))  # w-orthonormal
+        cosines = [float(np.linalg.norm(Q.T @ (w * r))) for r in rigid]
+        name, off = irrep(chars)
+        rows.append({"eigenvalues": [float(x) for x in vals[j:k]], "irrep": name,
+                     "off": off, "characters": chars, "rigid_cosine": max(cosines)})
+        j = k
+    kept.write_text(json.dumps(rows, indent=1) + "\n")
+    return rows
+
+
 def _at_membrane(X, phi, v, L: float) -> dict:
     """v's mean at the membrane (|φ| < 0.9) in the mid-plane z = L/2, in wedges of ±4° about
     θ = 0°, 45°, 90° (about the box's centre)."""
@@ -435,6 +512,7 @@ def report(result: dict, out: Path, suffix: str) -> None:
     if not suffix and (out / "starfish_octant-shapes.png").is_file():
         lines += ["", "![the ends](starfish_octant-shapes.png)"]
     lines += _directions_table(result.get("directions") or [])
+    lines += _box_directions_table(result.get("box_directions") or [])
     write_report(out, f"starfish_octant{suffix}", lines)
 
 
@@ -457,6 +535,26 @@ def _directions_table(rows: list[dict]) -> list[str]:
         out.append(f"| {r['j']} | {r['eigenvalue']:.2e} | {r['parity']} | {where} | "
                    f"{end['label']}, {end['symmetry']} ({end['status']}, {end['steps']} steps,"
                    f" {end['cpu_s']:.0f} s) | {end['e']:.5f} | {diff} |")
+    return out
+
+
+def _box_directions_table(rows: list[dict]) -> list[str]:
+    if not rows:
+        return []
+    out = ["", f"The unfolded end's lowest eigenspaces on the whole box (ε = {DIRECTIONS_EPS:g}, "
+           "Newton's polish first; `box_directions`): each one's eigenvalues, the "
+           "irreducible representation of D4h it carries (its characters under C4 and C2 "
+           "about z, σh (z), σv (x; the arms lie along x and y), σd (x ↔ y) and i, about the "
+           "box's centre; in brackets their distance from that irrep's) and its largest "
+           "cosine with a rigid motion (translations and rotations, which the stability "
+           "projects out):", "",
+           "| λ | irrep | characters (C4, C2, σh, σv, σd, i) | cosine with a rigid motion |",
+           "|---|---|---|---|"]
+    for r in rows:
+        lams = ", ".join(f"{v:.3e}" for v in r["eigenvalues"])
+        chars = ", ".join(f"{c:+.2f}" for c in r["characters"])
+        out.append(f"| {lams} | {r['irrep']} ({r['off']:.0e}) | {chars} | "
+                   f"{r['rigid_cosine']:.2e} |")
     return out
 
 
@@ -491,8 +589,9 @@ def compute(root: Path, quick: bool) -> dict:
     dirs = [{**r, "e_start": x["e"]} for r in directions(root, root / x["folder"], quick)]
     # the same end unfolded onto the whole box: its stability without the sector's mirrors
     box = [] if quick else [box_end(root, x)]
+    box_dirs = [] if quick else box_directions(root / box[0]["folder"])
     return {"lines": lines, "switches": switches, "ladder": ladder, "box": box,
-            "directions": dirs}
+            "directions": dirs, "box_directions": box_dirs}
 
 
 def main(argv=None) -> dict:
