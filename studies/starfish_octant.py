@@ -91,13 +91,6 @@ DIRECTIONS_EPS, DIRECTIONS, KICK = 0.02, 3, 0.1
 #: the box end's lowest eigenvectors characterised (:func:`box_directions`): its four
 #: unstable ones and the fifth, at −1.5e-6, just above the threshold
 BOX_DIRECTIONS = 5
-#: the characters of D4h's irreducible representations under C4 (about z), C2 (about z),
-#: σh (z), σv (x; the arms lie along x and y), σd (x ↔ y) and i, about the box's centre
-D4H = {"A1g": (1, 1, 1, 1, 1, 1), "A2g": (1, 1, 1, -1, -1, 1), "B1g": (-1, 1, 1, 1, -1, 1),
-       "B2g": (-1, 1, 1, -1, 1, 1), "Eg": (0, -2, -2, 0, 0, 2),
-       "A1u": (1, 1, -1, -1, -1, -1), "A2u": (1, 1, -1, 1, 1, -1),
-       "B1u": (-1, 1, -1, -1, 1, -1), "B2u": (-1, 1, -1, 1, -1, -1),
-       "Eu": (0, -2, 2, 0, 0, -2)}
 
 
 def _line(root: Path, eps: float, branch: str, start: float, stop: float,
@@ -314,44 +307,17 @@ def directions(root: Path, folder: Path, quick: bool) -> list[dict]:
     return rows
 
 
-def d4h_characters(X, w, V, L: float) -> list[float]:
-    """The characters of the space spanned by the columns of V (fields on the nodes X, 3 × N,
-    of a mesh symmetric about the box's centre; inner product weighted by w) under the
-    operations of :data:`D4H`: trace(G⁻¹ Vᵀ W V∘g), G = Vᵀ W V — ±1 for a one-dimensional
-    irreducible space, the irrep's character for a degenerate pair."""
-    import numpy as np
-    from scipy.spatial import cKDTree
-
-    c = L / 2.0
-    x, y, z = X - c
-    images = [(-y, x, z), (-x, -y, z), (x, y, -z), (-x, y, z), (y, x, z), (-x, -y, -z)]
-    tree = cKDTree(np.mod(X.T, L), boxsize=L)
-    G = V.T @ (w[:, None] * V)
-    out = []
-    for image in images:
-        moved = tree.query(np.mod(np.stack(image).T + c, L))[1]
-        out.append(float(np.trace(np.linalg.solve(G, V.T @ (w[:, None] * V[moved])))))
-    return out
-
-
-def irrep(chars: list[float]) -> tuple[str, float]:
-    """The irreducible representation of D4h whose characters are nearest ``chars`` (of one
-    eigenspace: :func:`d4h_characters`), and that distance (0: exactly it)."""
-    import numpy as np
-
-    name = min(D4H, key=lambda k: np.linalg.norm(np.subtract(D4H[k], chars)))
-    return name, float(np.linalg.norm(np.subtract(D4H[name], chars)))
-
-
 def box_directions(folder: Path) -> list[dict]:
     """The box end's :data:`BOX_DIRECTIONS` lowest eigenvectors (Newton's polish first),
     grouped into eigenspaces (eigenvalues equal to 1e-6, relative): each one's D4h irrep
-    (:func:`irrep`, its characters) and its largest cosine with a rigid motion (the
-    translations and rotations, :func:`fem_ade.backends.fem.modes.rigid_motions`, which the
-    stability projects out: a direction near one is that motion left over). Kept in
+    (:func:`fem_ade.analysis.symmetry.irrep`, its characters) and its largest cosine with a
+    rigid motion (the translations and rotations,
+    :func:`fem_ade.backends.fem.modes.rigid_motions`, which the stability projects out: a
+    direction near one is that motion left over). Kept in
     ``folder/directions.json`` (minutes: 885k unknowns)."""
     import numpy as np
 
+    from fem_ade.analysis.symmetry import d4h_characters, irrep
     from fem_ade.backends.fem.modes import rigid_motions
     from fem_ade.campaigns.stability import cartesian, load_state, polish
 

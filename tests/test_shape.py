@@ -12,6 +12,7 @@ import pytest
 
 from fem_ade.analysis.shape import describe
 from fem_ade.analysis.surface import euler_characteristic, extract_surface
+from fem_ade.analysis.symmetry import d4h_characters, irrep
 
 N, L, EPS = 64, 1.0, 0.025
 C = (0.5, 0.5, 0.5)
@@ -369,3 +370,25 @@ def test_describe_reports_the_symmetry_and_names_a_triaxial_ellipsoid():
     pro = describe(profile(_spheroid((0.15, 0.15, 0.25), TILT), EPS_S), L)
     assert pro["label"] == "prolate" and pro["body"]["symmetry"]["group"] == "D∞h"
     assert "1 component, genus 0, arms = 1, symmetry D∞h;" in summary_line(pro)
+
+
+def test_an_eigenspace_is_named_by_its_d4h_irrep():
+    """D4h's characters of a space of fields (the starfish's eigenspaces, starfish_octant):
+    fields of known symmetry about the box's centre on a periodic grid, one-dimensional and
+    the two pairs, are named by their irreps exactly, and a field of two irreps at once by
+    neither."""
+    n, L = 16, 1.0
+    g = np.arange(n) * L / n
+    X = np.stack([a.ravel() for a in np.meshgrid(g, g, g, indexing="ij")])
+    x, y, z = X - L / 2
+    G = np.exp(-(x * x + y * y + z * z) / 0.02)
+    cases = {"A1g": [x * x + y * y], "A2g": [x * y * (x * x - y * y)], "B1g": [x * x - y * y],
+             "B2g": [x * y], "Eg": [x * z, y * z], "A1u": [x * y * z * (x * x - y * y)],
+             "A2u": [z], "B1u": [x * y * z], "B2u": [z * (x * x - y * y)], "Eu": [x, y]}
+    w = np.ones(X.shape[1])
+    for name, fields in cases.items():
+        chars = d4h_characters(X, w, np.stack([G * f for f in fields], 1), L)
+        found, off = irrep(chars)
+        assert (found, round(off, 6)) == (name, 0.0), (name, chars)
+    _, off = irrep(d4h_characters(X, w, (G * (x * x - y * y + x * y))[:, None], L))
+    assert off > 0.5  # B1g + B2g: not one irrep

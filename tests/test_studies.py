@@ -964,24 +964,3 @@ def test_no_study_imports_another():
         assert _reaches_another_study(leak, studies), leak
     assert _reaches_another_study("from _lib.fits import time_to\nimport sys\n", studies) == []
 
-
-def test_the_starfish_box_directions_name_their_irreps():
-    """starfish_octant's D4h characters (the box end's eigenspaces): fields of known
-    symmetry about the box's centre on a periodic grid, one-dimensional and the two pairs,
-    are named by their irreps exactly, and a field of two irreps at once by neither."""
-    so = _load(STUDIES / "starfish_octant.py")
-    n, L = 16, 1.0
-    g = np.arange(n) * L / n
-    X = np.stack([a.ravel() for a in np.meshgrid(g, g, g, indexing="ij")])
-    x, y, z = X - L / 2
-    G = np.exp(-(x * x + y * y + z * z) / 0.02)
-    cases = {"A1g": [x * x + y * y], "A2g": [x * y * (x * x - y * y)], "B1g": [x * x - y * y],
-             "B2g": [x * y], "Eg": [x * z, y * z], "A1u": [x * y * z * (x * x - y * y)],
-             "A2u": [z], "B1u": [x * y * z], "B2u": [z * (x * x - y * y)], "Eu": [x, y]}
-    w = np.ones(X.shape[1])
-    for name, fields in cases.items():
-        chars = so.d4h_characters(X, w, np.stack([G * f for f in fields], 1), L)
-        found, off = so.irrep(chars)
-        assert (found, round(off, 6)) == (name, 0.0), (name, chars)
-    _, off = so.irrep(so.d4h_characters(X, w, (G * (x * x - y * y + x * y))[:, None], L))
-    assert off > 0.5  # B1g + B2g: not one irrep

@@ -290,3 +290,42 @@ def point_group(sym: dict) -> str:
         return f"C{m}h"
     others = [ax for k, ax in enumerate(axes) if k != main]
     return f"D{m}" if any(ax["order"] % 2 == 0 for ax in others) else f"C{m}"
+
+
+# ---------------------------------------------------------------------------------------------
+# the irreducible representation an eigenspace of a D4h state carries
+# ---------------------------------------------------------------------------------------------
+#: the characters of D4h's irreducible representations under C4 (about z), C2 (about z),
+#: σh (z), σv (x), σd (x ↔ y) and i, about the box's centre (for a four-armed starfish
+#: with its arms along x and y: ``studies/starfish_octant.py``)
+D4H = {"A1g": (1, 1, 1, 1, 1, 1), "A2g": (1, 1, 1, -1, -1, 1), "B1g": (-1, 1, 1, 1, -1, 1),
+       "B2g": (-1, 1, 1, -1, 1, 1), "Eg": (0, -2, -2, 0, 0, 2),
+       "A1u": (1, 1, -1, -1, -1, -1), "A2u": (1, 1, -1, 1, 1, -1),
+       "B1u": (-1, 1, -1, -1, 1, -1), "B2u": (-1, 1, -1, 1, -1, -1),
+       "Eu": (0, -2, 2, 0, 0, -2)}
+
+
+def d4h_characters(X, w, V, L: float) -> list[float]:
+    """The characters of the space spanned by the columns of V (fields on the nodes X, 3 × N,
+    of a mesh symmetric about the box's centre; inner product weighted by w) under the
+    operations of :data:`D4H`: trace(G⁻¹ Vᵀ W V∘g), G = Vᵀ W V — ±1 for a one-dimensional
+    irreducible space, the irrep's character for a degenerate pair."""
+    from scipy.spatial import cKDTree
+
+    c = L / 2.0
+    x, y, z = X - c
+    images = [(-y, x, z), (-x, -y, z), (x, y, -z), (-x, y, z), (y, x, z), (-x, -y, -z)]
+    tree = cKDTree(np.mod(X.T, L), boxsize=L)
+    G = V.T @ (w[:, None] * V)
+    out = []
+    for image in images:
+        moved = tree.query(np.mod(np.stack(image).T + c, L))[1]
+        out.append(float(np.trace(np.linalg.solve(G, V.T @ (w[:, None] * V[moved])))))
+    return out
+
+
+def irrep(chars: list[float]) -> tuple[str, float]:
+    """The irreducible representation of D4h whose characters are nearest ``chars`` (of one
+    eigenspace: :func:`d4h_characters`), and that distance (0: exactly it)."""
+    name = min(D4H, key=lambda k: np.linalg.norm(np.subtract(D4H[k], chars)))
+    return name, float(np.linalg.norm(np.subtract(D4H[name], chars)))
