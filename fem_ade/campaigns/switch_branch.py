@@ -6,18 +6,19 @@ the 3D tensor FEM, with Newton's pins for the rigid motions.
 axisymmetric state φ₀ (the branch point on its unstable side, revolved onto the 3D mesh) has a
 near-zero mode ψ_m(r, z) cos mθ, and the non-axisymmetric branch leaves it along that mode
 (a pitchfork: φ₀'s rotations by π/m turn one side of it into the other). Its first two points
-are solved at a fixed **amplitude** a of the mode, with v (the reduced volume, free):
+are solved at a fixed **amplitude** a of the mode, with the branch's parameter p free (v,
+the reduced volume, or Δa₀: see **The parameter** below):
 
-    F(φ, v) = 0,    ⟨ψ̂, φ − φ₀⟩ = a ⟨ψ̂, ψ̂⟩,     a = a₁ = ``step``, then 2a₁ (or a₁ + δ),
+    F(φ, p) = 0,    ⟨ψ̂, φ − φ₀⟩ = a ⟨ψ̂, ψ̂⟩,     a = a₁ = ``step``, then 2a₁ (or a₁ + δ),
 
 ψ̂ = ψ_m cos mθ scaled to max |ψ̂| = 1: :meth:`fem_ade.campaigns.continuation.Continuation.
-advance` along the tangent (ψ̂, 0) from (φ₀, v₀) (:func:`_advance` says how the second
+advance` along the tangent (ψ̂, 0) from (φ₀, p₀) (:func:`_advance` says how the second
 is found where Newton does not converge). An axisymmetric state has no m-part, so
-this constraint cannot be met on the axisymmetric branch, whatever v: it picks the new
+this constraint cannot be met on the axisymmetric branch, whatever p: it picks the new
 branch. From there the branch is followed as the axisymmetric ones are (the secant, then the
 quadratic predictor; Newton's correction on the extended system; the step halved where it
 fails, grown by 1.5 where Newton takes ≤ 4 iterations, up to 4·``step``), in the arclength
-√(θ⟨Δφ, Δφ⟩ + Δv²) with θ = 1/⟨ψ̂, ψ̂⟩: a step of ``step`` moves the mode's amplitude by
+√(θ⟨Δφ, Δφ⟩ + Δp²) with θ = 1/⟨ψ̂, ψ̂⟩: a step of ``step`` moves the mode's amplitude by
 about ``step`` in max norm. Measured (ε = 0.04): starting the secant at φ₀ itself (one point
 at amplitude 0.1, then the chord from φ₀ to it) went back onto the oblate at the second point;
 the two fixed-amplitude points do not.
@@ -311,7 +312,7 @@ def _add_point(out: Path, tag: str, cont, done: list, corrected, used: float, ba
 
 def _advance(cont, done: list, anchor: tuple, psi, step: float, ds: float):
     """The next point of the branch past ``done`` (its (row, φ)): the first at the mode's
-    amplitude a₁ = ``step`` off the anchor (φ₀, v₀), the second at 2a₁ predicted from φ₀
+    amplitude a₁ = ``step`` off the anchor (φ₀, p₀), the second at 2a₁ predicted from φ₀
     or, where Newton does not converge from there, at a₁ + δ predicted from the first, δ =
     ``step``/2 halved until it does (measured at ε = 0.02 on 96³ nodes: 2a₁ from φ₀ did not
     converge, and :meth:`~fem_ade.campaigns.continuation.Continuation.advance`'s halving
