@@ -227,7 +227,7 @@ class NewtonSystem:
         or None if that does not converge."""
         p = self.params
         mu, Kphi = self.fields(phi)
-        d = [self.P_inverse(c) for c in self.constraint_gradients(phi, Kphi)[:2]]
+        d = self.restore_directions(phi, Kphi)
         Kd = [self.w * self.space.laplacian(x) for x in d]
         ab = np.zeros(2)
         for _ in range(steps):
@@ -246,6 +246,10 @@ class NewtonSystem:
                 return None
         u = phi + ab[0] * d[0] + ab[1] * d[1]
         return u if np.all(np.isfinite(u)) else None
+
+    def restore_directions(self, phi, Kphi) -> list[np.ndarray]:
+        """The directions :meth:`restore` moves along: P⁻¹∇V, P⁻¹∇A."""
+        return [self.P_inverse(c) for c in self.constraint_gradients(phi, Kphi)[:2]]
 
     # -- linear algebra ----------------------------------------------------------------------
     def P_inverse(self, x: np.ndarray) -> np.ndarray:
@@ -402,7 +406,7 @@ def minres(A, b: np.ndarray, M, *, rtol: float, maxiter: int) -> tuple[np.ndarra
 
 def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
                  max_halvings: int = 10, inner_tol: float = 1e-8,
-                 quiet: bool = True, linear: str = "auto") -> NewtonResult:
+                 quiet: bool = True, linear: str = "auto", system=None) -> NewtonResult:
     """Newton's method from the backend's current state to a steady state with V = α and
     A = β exactly (module docstring). Each iteration: the bordered system by MINRES (its
     preconditioned residual below ``inner_tol``), then the step (reversed where it climbs,
@@ -410,9 +414,11 @@ def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
     least 1e-4 of the Newton decrement once the constraints are restored along P⁻¹∇V,
     P⁻¹∇A (Armijo; a full step where the quadratic model holds). Stops when the decrement
     is below ``tol``·|E|. The backend is left at the last state reached (its field, with
-    φⁿ⁻¹ cleared); :class:`NewtonResult` says whether it converged."""
+    φⁿ⁻¹ cleared); :class:`NewtonResult` says whether it converged. ``system``: the Newton
+    system to use (default ``NewtonSystem(be, linear)``; e.g. one with extra pins, or
+    :class:`fem_ade.backends.fem.fourier.FourierNewtonSystem`)."""
     t0 = time.perf_counter()
-    sys_ = NewtonSystem(be, linear)
+    sys_ = NewtonSystem(be, linear) if system is None else system
     step = sys_.step
     phi = sys_.restore(be.phi.copy())
     if phi is None:

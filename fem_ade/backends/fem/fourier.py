@@ -1,0 +1,351 @@
+"""The Fourier–(r, z) geometry: a field with the mirror symmetries of an m₀-fold shape about
+the z axis, φ(r, z, θ) = Σⱼ aⱼ(r, z) cos(j m₀ θ), j = 0 … n_θ − 1, on the axisymmetric
+geometry's spectral elements in (r, z) and n_θ collocation angles in θ (docs/model.md §13).
+
+Why. The azimuthal blocks (:mod:`fem_ade.backends.fem.modes`) say where an axisymmetric state
+loses stability in mode m; the branch born there is non-axisymmetric. Near its birth it is a
+few cosines away from the axisymmetric state, and a 3D box spends most of its nodes on what
+the (r, z) mesh already resolves. Here the cost is n_θ (r, z) problems (the Fourier–spectral-
+element idea of cylindrical flow codes: Semtex, Nek5000's Fourier option).
+
+The discrete space. The nodes are the (r, z) mesh's axis nodes (one value each, the same for
+every θ) and its other nodes at the angles θ_k = (k + ½)π/(m₀ n_θ), k < n_θ — the midpoints
+of the fundamental sector 0 ≤ θ ≤ π/m₀, whose even reflections are the shape's mirror planes
+(θ = 0 and θ = π/m₀). With the (r, z) weights w (which carry 2πr) and its stiffness K_rz,
+
+    W = diag(w_axis, w_off/n_θ, …),
+    xᵀKx = (1/n_θ) Σ_k s_kᵀ K_rz s_k + Σ_off (M ⊗ K_θ),   s_k = (axis values, values at θ_k),
+
+with M = M_{1/r²} the Gram matrix of ∫ψχ/r² 2πr (:func:`fem_ade.backends.fem.modes.
+radial_inverse_square`, exact on fields that vanish on the axis) and K_θ = (1/n_θ) Qᵀ diag(
+(j m₀)²) Q, Q the orthonormal DCT-II along θ: (1/n_θ) Σ_k x_k² and xᵀK_θx are the θ-means of
+u² and (∂_θu)² exactly for u = Σⱼ bⱼcos(j m₀ θ), j < n_θ. Every other term of E_h is a nodal
+product with the weights W (:mod:`fem_ade.backends.fem.forms`), so the scheme's own energy,
+gradient and Hessian (:class:`fem_ade.backends.fem.step.MixedStep`) apply unchanged: nodal
+products in θ are collocation (the cosines' products alias above j = n_θ).
+
+In the modes (the DCT of the off-axis values) W and K are block-diagonal: mode 0 is the
+axisymmetric space (axis values with the θ-mean of the others) and mode j ≥ 1 is the azimuthal
+block m = j m₀ off the axis, K_m = K_rz + m²M, both scaled by 1/n_θ. A field with one mode,
+ψ(r, z) cos mθ, has the energy, gradient and Hessian of the (r, z) block m (tests).
+
+Newton's method (:class:`FourierNewtonSystem`) solves the bordered system by GMRES,
+preconditioned by the modes' blocks at the θ-mean of the Hessian's coefficients — exact for
+an axisymmetric state, whose Hessian is block-diagonal — each factored by the sparse LU of
+the axisymmetric geometry (:mod:`fem_ade.backends.fem.direct`), the constraints and the
+rank-one terms as borders of the whole. No rigid motion keeps both mirror planes but the
+translation along z, which is pinned as on the axisymmetric geometry.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy import fft
+
+from fem_ade.backends.fem.newton import NewtonSystem
+from fem_ade.backends.fem.solve import global_dot
+from fem_ade.model.params import ModelError
+
+#: GMRES of the bordered Newton system: its restart length and its most iterations
+RESTART, MAX_ITERATIONS = 60, 600
+
+
+class FourierSpace:
+    """The Fourier–(r, z) space of an (r, z) tensor space ``rz`` (module docstring): ``m0``
+    the shape's fold (its mirror planes θ = 0 and θ = π/m₀), ``n_theta`` angles. A field is
+    a vector [axis values; off-axis values at θ₀; … at θ_{n_θ−1}]."""
+
+    def __init__(self, rz, m0: int, n_theta: int):
+        from fem_ade.backends.fem.modes import radial_inverse_square
+
+        if not (isinstance(m0, (int, np.integer)) and m0 >= 1):
+            raise ModelError(f"the fold m0 is an integer >= 1, got {m0!r}")
+        if not (isinstance(n_theta, (int, np.integer)) and n_theta >= 1):
+            raise ModelError(f"n_theta is an integer >= 1, got {n_theta!r}")
+        self.rz, self.m0, self.n_theta = rz, int(m0), int(n_theta)
+        r, z = rz.doflocs
+        self.axis = np.flatnonzero(r == 0.0)
+        self.off = np.flatnonzero(r > 0.0)
+        self.na, self.no = self.axis.size, self.off.size
+        self.theta = (np.arange(n_theta) + 0.5) * math.pi / (m0 * n_theta)
+        self.m = m0 * np.arange(n_theta)  # the azimuthal mode of each cosine
+        self.K_rz = rz.assembled_stiffness()
+        self.M = sp.csr_matrix(radial_inverse_square(rz))[self.off][:, self.off].tocsr()
+        w = rz.weights
+        self.weights = np.concatenate([w[self.axis], np.tile(w[self.off] / n_theta, n_theta)])
+        self.n_dofs = self.weights.size
+        self.K = _Stiffness(self)
+        theta = np.concatenate([np.zeros(self.na), np.repeat(self.theta, self.no)])
+        self.doflocs = np.stack([np.concatenate([r[self.axis], np.tile(r[self.off], n_theta)]),
+                                 np.concatenate([z[self.axis], np.tile(z[self.off], n_theta)]),
+                                 theta])
+        self.order = rz.order
+
+    # -- fields --------------------------------------------------------------------------
+    def slices(self, x: np.ndarray) -> np.ndarray:
+        """The (r, z) fields at each angle, (n_θ, N_rz)."""
+        S = np.empty((self.n_theta, self.rz.n_dofs))
+        S[:, self.axis] = x[:self.na]
+        S[:, self.off] = x[self.na:].reshape(self.n_theta, self.no)
+        return S
+
+    def from_slices(self, S: np.ndarray) -> np.ndarray:
+        """The field whose slices are ``S`` (the axis values: their mean over θ)."""
+        S = np.asarray(S, dtype=float)
+        return np.concatenate([S[:, self.axis].mean(axis=0), S[:, self.off].ravel()])
+
+    def from_modes(self, modes: dict) -> np.ndarray:
+        """The field Σⱼ aⱼ(r, z) cos(j m₀ θ) of {j: aⱼ on the (r, z) nodes} (a₀ on the axis
+        nodes; the others' axis values are dropped: ψ = O(r^m) there)."""
+        S = np.zeros((self.n_theta, self.rz.n_dofs))
+        for j, a in modes.items():
+            if not 0 <= j < self.n_theta:
+                raise ModelError(f"mode j = {j} is not one of 0 … {self.n_theta - 1}")
+            S += np.cos(self.m[j] * self.theta)[:, None] * np.asarray(a, dtype=float)[None]
+        x = self.from_slices(S)
+        a0 = np.asarray(modes.get(0, np.zeros(self.rz.n_dofs)), dtype=float)
+        x[:self.na] = a0[self.axis]
+        return x
+
+    def modes(self, x: np.ndarray) -> np.ndarray:
+        """The cosine coefficients aⱼ(r, z), (n_θ, N_rz): the inverse of :meth:`from_modes`
+        (a₀ holds the axis values; aⱼ, j ≥ 1, is 0 there)."""
+        X = fft.dct(x[self.na:].reshape(self.n_theta, self.no), type=2, norm="ortho", axis=0)
+        X *= math.sqrt(2.0 / self.n_theta)
+        X[0] /= math.sqrt(2.0)
+        A = np.zeros((self.n_theta, self.rz.n_dofs))
+        A[:, self.off] = X
+        A[0, self.axis] = x[:self.na]
+        return A
+
+    def laplacian(self, x: np.ndarray) -> np.ndarray:
+        """μ = W⁻¹Kx."""
+        return (self.K @ x) / self.weights
+
+    def k_theta(self, X: np.ndarray) -> np.ndarray:
+        """K_θ along the first axis of X (n_θ, …)."""
+        Y = fft.dct(X, type=2, norm="ortho", axis=0)
+        Y *= (self.m.astype(float) ** 2).reshape((-1,) + (1,) * (X.ndim - 1))
+        return fft.idct(Y, type=2, norm="ortho", axis=0) / self.n_theta
+
+    def describe(self) -> dict:
+        return {"geometry": "fourier", "m0": self.m0, "n_theta": self.n_theta,
+                "rz_nodes": self.rz.n_dofs, "dofs": self.n_dofs, "order": self.order}
+
+
+class _Stiffness:
+    """K of a :class:`FourierSpace`, matrix-free (``K @ x``)."""
+
+    def __init__(self, space: FourierSpace):
+        self.space = space
+        self.shape = (space.n_dofs, space.n_dofs)
+
+    def __matmul__(self, x):
+        s = self.space
+        x = np.asarray(x, dtype=float)
+        KS = (s.K_rz @ s.slices(x).T).T / s.n_theta  # (n_θ, N_rz)
+        X = x[s.na:].reshape(s.n_theta, s.no)
+        off = KS[:, s.off] + (s.M @ s.k_theta(X).T).T
+        return np.concatenate([KS[:, s.axis].sum(axis=0), off.ravel()])
+
+
+@dataclass
+class FourierState:
+    """What Newton's method and the scheme's step need of a backend, on a
+    :class:`FourierSpace`: the space, the step (its params), the field φ, the scene."""
+
+    space: FourierSpace
+    stepper: object
+    phi: np.ndarray
+    scene: object
+    exact: bool = True
+    geometry: str = "fourier"
+
+    @property
+    def params(self):
+        return self.stepper.params
+
+    def _set(self, phi, phi_prev=None) -> None:
+        self.phi = np.asarray(phi, dtype=float)
+
+    @classmethod
+    def of(cls, be, m0: int, n_theta: int, modes: dict | None = None) -> FourierState:
+        """The Fourier–(r, z) state of an axisymmetric backend ``be`` (its mesh, order and
+        parameters): φ = be.phi + Σⱼ aⱼ cos(j m₀ θ) for ``modes`` {j: aⱼ}, j ≥ 1."""
+        from fem_ade.backends.fem.step import MixedStep
+
+        if getattr(be, "geometry", "") != "axisymmetric":
+            raise ModelError("the Fourier-(r, z) geometry extends an axisymmetric state")
+        space = FourierSpace(be.space, m0, n_theta)
+        step = MixedStep(space, be.stepper.params, scheme="stabilized", exact=True)
+        phi = space.from_modes({0: be.phi, **(modes or {})})
+        return cls(space, step, phi, be.scene)
+
+    def set_parameter(self, name: str, value: float) -> None:
+        """The parameter ``name`` (v, da0, …: :func:`fem_ade.scenes.vesicle.set_parameter`)
+        at ``value``."""
+        from fem_ade.scenes.vesicle import set_parameter
+
+        self.stepper.params = set_parameter(self.stepper.params, name, float(value))
+
+
+class FourierNewtonSystem(NewtonSystem):
+    """The bordered Newton system on a :class:`FourierSpace` (module docstring): the
+    translation along z pinned, extra ``pins`` (linear functionals' gradients, e.g. a mode's
+    amplitude) held where the start has them; solved by GMRES with the modes' blocks."""
+
+    def __init__(self, be: FourierState, linear: str = "auto", pins=()):
+        self.be, self.space, self.step = be, be.space, be.stepper
+        self.w = self.space.weights
+        z = self.space.doflocs[1]
+        self.translations = [self.w * (z - float(np.sum(self.w * z) / np.sum(self.w))),
+                             *[np.asarray(p, dtype=float) for p in pins]]
+        self.direct, self.uses_coarse, self.coarse, self._K = True, False, None, None
+        self._P = None
+        self.gmres_iterations: list[int] = []
+
+    # P⁻¹ by the modes' blocks (factored once)
+    def P_inverse(self, x: np.ndarray) -> np.ndarray:
+        if self._P is None:
+            a, c, ke = self.bulk()
+            ones = np.ones(self.space.rz.n_dofs)
+            self._P = ModeBlocks(self.space, ke, 0.0 * ones, a * ones, c)
+        x = np.asarray(x)
+        if x.ndim == 2:
+            return np.stack([self._P.solve(v) for v in x])
+        return self._P.solve(x)
+
+    def restore_directions(self, phi, Kphi) -> list[np.ndarray]:
+        """P⁻¹∇V, P⁻¹∇A less their parts along P⁻¹ of the pins, so that restoring V and A
+        moves no pinned functional (the amplitude a branch is followed in)."""
+        d = super().restore_directions(phi, Kphi)
+        T = np.column_stack(self.translations)
+        D = np.column_stack([self.P_inverse(t) for t in self.translations])
+        G = T.T @ D
+        return [x - D @ np.linalg.solve(G, T.T @ x) for x in d]
+
+    def factor(self, lin, sigma: float = 0.0, C=None):
+        """The bordered system at ``lin`` as a GMRES solver (:class:`KKTSolver`)."""
+        if sigma or C is not None:
+            raise ModelError("the Fourier-(r, z) Newton system solves at sigma = 0 only")
+        if lin.bordered is None:
+            lin.bordered = KKTSolver(self, lin)
+        return lin.bordered
+
+
+class ModeBlocks:
+    """The block-diagonal operator of the modes, factored: mode 0 the (r, z) H with the θ-mean
+    coefficients (α, γ on the (r, z) nodes), mode j ≥ 1 its block m = j m₀ off the axis;
+    ``solve`` applies its inverse to a field (module docstring)."""
+
+    def __init__(self, space: FourierSpace, ke: float, alpha, gamma, c0: float):
+        from fem_ade.backends.fem.direct import HessianFactor, node_order
+
+        self.space = space
+        rz, off = space.rz, space.off
+        shape = rz.shape
+        co0 = {"alpha": alpha, "gamma": gamma, "c0": c0}
+        self.factors = [HessianFactor(space.K_rz, rz.weights, ke, co0,
+                                      node_order(shape, rz.order))]
+        co = {"alpha": np.asarray(alpha)[off], "gamma": np.asarray(gamma)[off], "c0": c0}
+        nodes = node_order(shape, rz.order, off)
+        Koo = sp.csr_matrix(space.K_rz)[off][:, off].tocsr()
+        for m in space.m[1:]:
+            self.factors.append(HessianFactor(Koo + float(m * m) * space.M, rz.weights[off],
+                                              ke, co, nodes))
+        self.negative = [f.negative for f in self.factors]
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """The blocks' inverse on a field (the DCT along θ, n_θ (r, z) solves, back)."""
+        s = self.space
+        nt, sq = s.n_theta, math.sqrt(s.n_theta)
+        B = fft.dct(b[s.na:].reshape(nt, s.no), type=2, norm="ortho", axis=0)
+        b0 = np.empty(s.rz.n_dofs)  # mode 0 in (r, z) coordinates: D⁻¹ on the right side
+        b0[s.axis], b0[s.off] = b[:s.na], B[0] * sq
+        x0 = self.factors[0].solve(b0)
+        X = np.empty_like(B)
+        X[0] = x0[s.off] * sq
+        for j in range(1, nt):
+            X[j] = nt * self.factors[j].solve(B[j])
+        return np.concatenate([x0[s.axis], fft.idct(X, type=2, norm="ortho", axis=0).ravel()])
+
+
+class KKTSolver:
+    """[[H_L, C], [Cᵀ, 0]] at a linearization, by GMRES preconditioned by the same system
+    with the modes' blocks for H_L (:class:`ModeBlocks`, its borders by
+    :class:`fem_ade.backends.fem.direct.Bordered`); ``solve(b, c)`` → (x, multipliers)."""
+
+    def __init__(self, sys_: FourierNewtonSystem, lin, rtol: float = 1e-9):
+        from fem_ade.backends.fem.direct import Bordered
+
+        t0 = time.perf_counter()
+        self.sys, self.lin, self.rtol = sys_, lin, rtol
+        step, space = sys_.step, sys_.space
+        co = step.hessian_coefficients(lin.phi, lin.mu, lin.Kphi, lin.lam[0], lin.lam[1])
+        mean = [theta_mean(space, np.broadcast_to(co[k], lin.phi.shape)) for k in ("alpha",
+                                                                                  "gamma")]
+        self.blocks = ModeBlocks(space, sys_.bulk()[2], mean[0], mean[1], co["c0"])
+        self.rank_one = co["rank_one"]
+        self.C = lin.C
+        self.prec = Bordered(self._blocks_solve, [b for _, b in self.rank_one],
+                             [s for s, _ in self.rank_one], self.C)
+        self.setup_s = time.perf_counter() - t0
+        self.iterations: list[int] = []
+
+    def _blocks_solve(self, B):
+        B = np.asarray(B)
+        if B.ndim == 2:
+            return np.column_stack([self.blocks.solve(B[:, j]) for j in range(B.shape[1])])
+        return self.blocks.solve(B)
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        lin, step = self.lin, self.sys.step
+        N = lin.phi.size
+        v, nu = x[:N], x[N:]
+        top = (step.hessian_vector(lin.phi, lin.mu, lin.Kphi, v)
+               + step.constraint_hessian_vector(lin.phi, lin.Kphi, v, lin.lam[0], lin.lam[1]))
+        for nj, cj in zip(nu, self.C, strict=True):
+            top = top + nj * cj
+        return np.concatenate([top, [global_dot(c, v) for c in self.C]])
+
+    def solve(self, b: np.ndarray, c: np.ndarray | None = None):
+        from scipy.sparse.linalg import LinearOperator, gmres
+
+        b = np.asarray(b, dtype=float)
+        if b.ndim == 2:
+            cols = [self.solve(b[:, j], None if c is None else c[:, j])
+                    for j in range(b.shape[1])]
+            return np.column_stack([x for x, _ in cols]), np.column_stack([y for _, y in cols])
+        N, k = b.size, len(self.C)
+        rhs = np.concatenate([b, np.zeros(k) if c is None else c])
+        A = LinearOperator((N + k, N + k), matvec=self.apply, dtype=float)
+
+        def prec(r):
+            x, y = self.prec.solve(r[:N], r[N:])
+            return np.concatenate([x, y])
+
+        M = LinearOperator((N + k, N + k), matvec=prec, dtype=float)
+        count = [0]
+        x, info = gmres(A, rhs, M=M, rtol=self.rtol, atol=0.0, restart=RESTART,
+                        maxiter=MAX_ITERATIONS // RESTART + 1,
+                        callback=lambda _: count.__setitem__(0, count[0] + 1),
+                        callback_type="pr_norm")
+        self.iterations.append(count[0])
+        self.sys.gmres_iterations.append(count[0])
+        if info != 0:
+            raise ArithmeticError(f"GMRES did not reach {self.rtol:g} in {count[0]} "
+                                  "iterations on the Fourier-(r, z) Newton system")
+        return x[:N], x[N:]
+
+
+def theta_mean(space: FourierSpace, x: np.ndarray) -> np.ndarray:
+    """The θ-mean of a nodal field on the (r, z) nodes."""
+    out = np.empty(space.rz.n_dofs)
+    out[space.axis] = x[:space.na]
+    out[space.off] = x[space.na:].reshape(space.n_theta, space.no).mean(axis=0)
+    return out

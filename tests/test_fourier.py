@@ -1,0 +1,115 @@
+"""The Fourier–(r, z) geometry (fem_ade.backends.fem.fourier; docs/model.md §13): an
+axisymmetric field has the (r, z) energy, one cosine has the azimuthal block's Hessian, the
+modes go and come back, Newton with an amplitude pin finds a steady state with that amplitude,
+and a kick in a stable mode goes back to the axisymmetric state."""
+
+import numpy as np
+import pytest
+
+from fem_ade.backends.fem.fourier import FourierNewtonSystem, FourierSpace, FourierState
+from fem_ade.backends.fem.modes import lowest_mode, mode_block
+from fem_ade.backends.fem.newton import NewtonSystem, linearize, solve_steady
+from fem_ade.campaigns.branch import main as branch_main
+from fem_ade.campaigns.stability import load_state
+from fem_ade.model.params import ModelError
+
+
+@pytest.fixture(scope="module")
+def oblate(tmp_path_factory):
+    """The oblate at ε = 0.04, v = 0.85, R₀ = 0.25: one negative eigenvalue in block m = 2,
+    none in m = 4 (tests/test_modes.py)."""
+    out = tmp_path_factory.mktemp("fourier") / "oblate"
+    assert branch_main(["vesicle", "--branch", "oblate", "--eps", "0.04", "--R0", "0.25",
+                        "--param", "v", "--from", "0.85", "--to", "0.84", "--step", "0.01",
+                        "--quiet", "--out", str(out)]) == 0
+    be, _ = load_state(out / "points" / "0000")
+    return be
+
+
+def _fields(space, phi):
+    mu = space.laplacian(phi)
+    return mu, space.weights * mu
+
+
+def test_an_axisymmetric_field_has_the_rz_energy(oblate):
+    """φ(r, z) on the Fourier space: E, V, A, ΔA of the (r, z) geometry (to round-off), and
+    the gradient's θ-sum is the (r, z) gradient's (to 1e-9 of its largest entry; measured
+    2.4e-10: the DCT's round-off on a θ-constant field, times m² and 1/r² next to the axis)."""
+    st = FourierState.of(oblate, 2, 4)
+    three = st.stepper.diagnostics(st.phi, *_fields(st.space, st.phi))
+    two = oblate.stepper.diagnostics(oblate.phi, *_fields(oblate.space, oblate.phi))
+    for k in ("E", "V", "A", "dA"):
+        assert three[k] == pytest.approx(two[k], rel=1e-12), k
+    g3 = st.stepper.gradient(st.phi, *_fields(st.space, st.phi))
+    g2 = oblate.stepper.gradient(oblate.phi, *_fields(oblate.space, oblate.phi))
+    s = st.space
+    off = g3[s.na:].reshape(s.n_theta, s.no).sum(axis=0)  # the θ-sum of the nodal weights
+    assert np.allclose(g3[:s.na], g2[s.axis], rtol=0, atol=1e-9 * np.abs(g2).max())
+    assert np.allclose(off, g2[s.off], rtol=0, atol=1e-9 * np.abs(g2).max())
+
+
+@pytest.mark.parametrize("m0, j", [(2, 1), (2, 2), (3, 1)])
+def test_one_cosine_has_the_blocks_hessian(oblate, m0, j):
+    """v = ψ(r, z) cos(j m₀ θ): vᵀ H_L v on the Fourier space is ½ ψᵀ H_m ψ of the (r, z)
+    block m = j m₀ (the θ-mean of cos² is ½), for a random ψ off the axis."""
+    sys2 = NewtonSystem(oblate)
+    lin2 = linearize(sys2, oblate.phi)
+    m = j * m0
+    block = mode_block(sys2, lin2, m)
+    psi = np.zeros(oblate.space.n_dofs)
+    psi[block.free] = np.random.default_rng(m).standard_normal(block.size)
+    st = FourierState.of(oblate, m0, 4)
+    v = st.space.from_modes({j: psi})
+    sys3 = FourierNewtonSystem(st)
+    lin3 = linearize(sys3, st.phi)
+    step = st.stepper
+    Hv = step.hessian_vector(lin3.phi, lin3.mu, lin3.Kphi, v) + step.constraint_hessian_vector(
+        lin3.phi, lin3.Kphi, v, lin3.lam[0], lin3.lam[1])
+    assert v @ Hv == pytest.approx(0.5 * psi[block.free] @ block.H(psi[block.free]), rel=1e-10)
+
+
+def test_the_modes_go_and_come_back(oblate):
+    """from_modes then modes is the identity on cosines below n_θ (ψ off the axis for j ≥ 1),
+    and a cosine at or above n_θ is refused."""
+    space = FourierSpace(oblate.space, 2, 5)
+    rng = np.random.default_rng(0)
+    r = oblate.space.doflocs[0]
+    given = {j: rng.standard_normal(r.size) * (r > 0 if j else 1) for j in range(5)}
+    back = space.modes(space.from_modes(given))
+    assert max(np.abs(back[j] - given[j]).max() for j in range(5)) < 1e-13
+    with pytest.raises(ModelError, match="mode j = 5"):
+        space.from_modes({5: given[1]})
+
+
+def test_a_pinned_cosine_is_a_steady_state_at_its_amplitude(oblate):
+    """The oblate (unstable in m = 2) kicked along its m = 2 eigenvector, the kick's amplitude
+    pinned: Newton converges, keeps the amplitude, and the result is lower than the oblate."""
+    sys2 = NewtonSystem(oblate)
+    _, psi = lowest_mode(sys2, linearize(sys2, oblate.phi), 2)
+    st = FourierState.of(oblate, 2, 4, {1: 0.2 * psi})
+    P = st.space.from_modes({1: psi})
+    pin = st.space.weights * P
+    before = float(pin @ st.phi)
+    sys3 = FourierNewtonSystem(st, pins=[pin])
+    res = solve_steady(st, system=sys3)
+    assert res.converged
+    assert float(pin @ st.phi) == pytest.approx(before, rel=1e-10)
+    E0 = oblate.stepper.diagnostics(oblate.phi, *_fields(oblate.space, oblate.phi))["E"]
+    assert res.E < E0
+    assert max(sys3.gmres_iterations) < 100
+
+
+def test_a_kick_in_a_stable_mode_goes_back(oblate):
+    """The oblate kicked by 0.1 ψ cos 4θ (block m = 4 is stable), no pin: Newton goes back to
+    the axisymmetric state — the cosines below 1e-6 (measured 1.05e-7: Newton stops on the
+    energy's decrement, 1e-12 of E), E the (r, z) one."""
+    st = FourierState.of(oblate, 2, 4)
+    r = oblate.space.doflocs[0]
+    bump = np.exp(-((r - r.max() / 2) ** 2) / 0.01) * (r > 0)
+    st.phi = st.space.from_modes({0: oblate.phi, 2: 0.1 * bump})
+    res = solve_steady(st, system=FourierNewtonSystem(st))
+    assert res.converged
+    A = st.space.modes(st.phi)
+    assert np.abs(A[1:]).max() < 1e-6
+    E0 = oblate.stepper.diagnostics(oblate.phi, *_fields(oblate.space, oblate.phi))["E"]
+    assert res.E == pytest.approx(E0, rel=1e-10)
