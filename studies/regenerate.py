@@ -50,6 +50,7 @@ STEPS = (
     ("starfish", ["studies/starfish.py", "--out", RESULTS]),
     ("starfish_octant", ["studies/starfish_octant.py", "--out", RESULTS]),
     ("ade_octant", ["studies/ade_octant.py", "--out", RESULTS]),
+    ("triaxial", ["studies/triaxial.py", "--out", RESULTS]),
     ("newton3d_bench", ["studies/newton3d_bench.py", "--out", RESULTS]),
     ("nonaxisymmetric", ["studies/nonaxisymmetric.py", "--out", RESULTS, "--eps", "0.02"]),
     ("sweep_scaling", ["studies/sweep_scaling.py", "--out", RESULTS]),
@@ -109,6 +110,8 @@ MEASUREMENTS = {"convergence": "errors and times of each resolution, in one proc
                 "ade_octant": "each state's (r, z) point, then its two 3D octant runs in a "
                               "process pool (runs from switched starts, with their CPU "
                               "seconds)",
+                "triaxial": "a Fourier-(r, z) branch's points, each its seconds, one after "
+                            "another in one process",
                 "ade_azimuthal": "one point per cell of the ADE plane and its modes, in a "
                                  "process pool (a one-point branch: a sweep's [branch] has "
                                  "no max_points)"}

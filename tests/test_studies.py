@@ -566,6 +566,28 @@ def check_starfish(result, out):
     assert (out / "starfish_quick.md").is_file() and (out / "starfish_quick.png").is_file()
 
 
+def check_triaxial(result, out):
+    """The oblate at ε = 0.04, v = 0.85 (unstable in m = 2), its m = 2 branch on the
+    Fourier–(r, z) geometry at two amplitudes, in v: each point steady (the pin's multiplier
+    found zero by the secant), its first cosine the amplitude's size, n_θ doubled at the
+    second (its top cosine 2.8e-3 of the first on 4 angles: measured). The bifurcation is
+    subcritical in v there (measured: v 0.79927, then 0.79875; e above the oblate's by
+    3.9e-7, then 6.3e-6): the branch lies on the oblate's stable side and above it."""
+    (line,) = result["lines"]
+    assert line["failed"] is None and line["rows"][0]["lowest_m2"] < 0
+    pts = result["points"]
+    assert [x["amplitude"] for x in pts] == [0.1, 0.2] and result["param"] == "v"
+    assert [x["n_theta"] for x in pts] == [4, 8]
+    for x in pts:
+        assert x["cosines"][0] == pytest.approx(1.0, abs=0.05)
+        assert 0.5 * x["amplitude"] < x["cosines"][1] < 1.5 * x["amplitude"]
+        assert x["tail"] <= 1e-3 and math.isfinite(x["e"])
+    assert pts[1]["v"] < pts[0]["v"] < line["rows"][0]["v"]
+    assert 0 < pts[0]["e"] - pts[0]["e_oblate"] < pts[1]["e"] - pts[1]["e_oblate"]
+    text = (out / "triaxial_quick.md").read_text()
+    assert text.count("| 0.1 |") == 1 and text.count("| 0.2 |") == 1
+
+
 def check_starfish_octant(result, out):
     """A short discocyte line at ε = 0.01, v = 0.7 (its blocks m = 2, 3, 4 unstable from
     Δa₀ = 1.45: measured on the full line from 1.456), 10 steps of the octant's m = 4 flow
@@ -726,7 +748,7 @@ REPORTS = {"constraints_study": [], "sharp_limit": [], "gallery": [], "ade_plane
            "phase_diagram": [], "branches": [], "ade_branches": [], "azimuthal": [],
            "ade_azimuthal": [], "branch3d": [], "starfish": [], "ade_limit": [],
            "ade_bifurcations": [], "ade_octant": [], "branch3d_octant": [],
-           "starfish_octant": [], "switch": []}
+           "starfish_octant": [], "switch": [], "triaxial": []}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)

@@ -51,8 +51,10 @@ from fem_ade.backends.fem.newton import NewtonSystem
 from fem_ade.backends.fem.solve import global_dot
 from fem_ade.model.params import ModelError
 
-#: GMRES of the bordered Newton system: its restart length and its most iterations
-RESTART, MAX_ITERATIONS = 60, 600
+#: GMRES of the bordered Newton system: its restart length and its most iterations; a
+#: solve that stops short of its tolerance (stagnation near a bifurcation, where a mode's
+#: block is nearly singular: seen at 345 iterations) is used if its residual is below INEXACT
+RESTART, MAX_ITERATIONS, INEXACT = 60, 600, 1e-5
 
 
 class FourierSpace:
@@ -280,7 +282,7 @@ class KKTSolver:
     with the modes' blocks for H_L (:class:`ModeBlocks`, its borders by
     :class:`fem_ade.backends.fem.direct.Bordered`); ``solve(b, c)`` → (x, multipliers)."""
 
-    def __init__(self, sys_: FourierNewtonSystem, lin, rtol: float = 1e-9):
+    def __init__(self, sys_: FourierNewtonSystem, lin, rtol: float = 1e-8):
         from fem_ade.backends.fem.direct import Bordered
 
         t0 = time.perf_counter()
@@ -337,9 +339,11 @@ class KKTSolver:
                         callback_type="pr_norm")
         self.iterations.append(count[0])
         self.sys.gmres_iterations.append(count[0])
-        if info != 0:
-            raise ArithmeticError(f"GMRES did not reach {self.rtol:g} in {count[0]} "
-                                  "iterations on the Fourier-(r, z) Newton system")
+        if info != 0:  # an inexact step is still a Newton step (the line search checks it)
+            reached = float(np.linalg.norm(self.apply(x) - rhs) / np.linalg.norm(rhs))
+            if not reached <= INEXACT:
+                raise ArithmeticError(f"GMRES reached {reached:.1e} in {count[0]} iterations "
+                                      "on the Fourier-(r, z) Newton system")
         return x[:N], x[N:]
 
 

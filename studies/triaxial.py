@@ -1,0 +1,261 @@
+"""The v = 0.7 window of the ADE plane, where neither the oblate nor the prolate is stable in
+m = 2: the triaxial (D2h) branch born at the oblate's m = 2 bifurcation, followed on the
+Fourier–(r, z) geometry (issue 44).
+
+``ade_bifurcations.md`` found, at v = 0.7, ε = 0.01 (κ̄/κ = 1.4, R₀ = 0.195, order 8, 400
+nodes per L), the oblate unstable in m = 2 beyond Δa₀ = 1.0859 and the prolate unstable in
+m = 2 below 1.0957: between them no axisymmetric shape is stable. The octant at its default
+1.92 nodes per ε does not see this window (its mesh makes the two bistable,
+``ade_octant_notes.md``), and at 2.56 per ε one point took over 19 min of CPU.
+
+- **The lines** (the (r, z) FEM, the sweep's mesh): the oblate and the prolate from Δa₀ =
+  1.08 to 1.10 (step 0.01, blocks m ≤ 2).
+- **The branch**: from the oblate's last point, along its m = 2 eigenvector ψ, on the
+  Fourier–(r, z) geometry with fold m₀ = 2 (cosines of 2jθ: the mirror planes x = 0, y = 0)
+  and its amplitude a as the parameter (:mod:`fem_ade.campaigns.fourier_branch`): at each
+  a the Δa₀ where the pinned state is steady, n_θ doubled until the highest cosine is below
+  1e-3 of the first.
+- **Beside it**: the (r, z) oblate and prolate made steady at each point's Δa₀ (Newton from
+  the lines' nearest point), their e against the branch's.
+
+**Hypothesis**: a triaxial branch joins the oblate's m = 2 end to the prolate's, inside the
+window, and lies below both there: the window's lowest shape is a triaxial ellipsoid.
+**Control**: the branch's Δa₀ as a → 0 is the oblate's bifurcation as the (r, z) blocks
+locate it, and its e there is the oblate's.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _lib.cli import one_thread, results, study_parser, write_report  # noqa: E402
+
+one_thread()
+
+import json  # noqa: E402
+
+from _lib.branches import branch_rows, make_branch  # noqa: E402
+
+OUT = Path("runs") / "studies"
+V, KBAR, R0, EPS, N = 0.7, 1.4, 0.195, 0.01, 400
+#: the lines: (branch, Δa₀ from, to, step)
+LINES = (("oblate", 1.08, 1.10, 0.01), ("prolate", 1.08, 1.10, 0.01))
+#: the branch's amplitudes (max |ψ| = 1; φ's range is 2)
+AMPLITUDES = (0.05, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.3, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6, 4.0)
+#: the quick mode: the oblate at ε = 0.04, v = 0.85, R₀ = 0.25 (unstable in m = 2), two
+#: amplitudes, in v
+QUICK = {"v": 0.85, "eps": 0.04, "R0": 0.25, "amplitudes": (0.1, 0.2)}
+
+
+def _line(root: Path, branch: str, start: float, stop: float, step: float) -> dict:
+    made = make_branch(root / f"{branch}-v={V:g}-eps={EPS:g}",
+                       ["vesicle", "--branch", branch, "--v", str(V), "--kbar", str(KBAR),
+                        "--eps", str(EPS), "--R0", str(R0), "--n", str(N), "--param", "da0",
+                        "--from", str(start), "--to", str(stop), "--step", str(step),
+                        "--modes", "2"])
+    if isinstance(made, str):
+        return {"branch": branch, "failed": made}
+    rows = [{"da0": float(r["da0"]), "e": float(r["e"]),
+             "lowest_m2": float(r["lowest_m2"])} for r in branch_rows(made)]
+    bif = made / "bifurcations.json"
+    found = json.loads(bif.read_text())["bifurcations"] if bif.is_file() else []
+    return {"branch": branch, "failed": None, "folder": str(made), "rows": rows,
+            "bifurcations": [b for b in found if b["m"] == 2]}
+
+
+def _quick_line(root: Path) -> dict:
+    q = QUICK
+    made = make_branch(root / "oblate-quick",
+                       ["vesicle", "--branch", "oblate", "--eps", str(q["eps"]), "--R0",
+                        str(q["R0"]), "--param", "v", "--from", str(q["v"]), "--to",
+                        str(q["v"] - 0.01), "--step", "0.01", "--modes", "2"])
+    if isinstance(made, str):
+        return {"branch": "oblate", "failed": made}
+    rows = [{"v": float(r["v"]), "e": float(r["e"]), "lowest_m2": float(r["lowest_m2"])}
+            for r in branch_rows(made)]
+    return {"branch": "oblate", "failed": None, "folder": str(made), "rows": rows,
+            "bifurcations": []}
+
+
+def axisymmetric_e(folder: Path, param: str, value: float) -> float | None:
+    """e of the (r, z) state of the branch ``folder`` made steady at ``param`` = ``value``
+    from the branch's nearest point (None if Newton does not converge)."""
+    from fem_ade.analysis.sharp import reduced_energy
+    from fem_ade.backends.fem.newton import solve_steady
+    from fem_ade.campaigns.stability import load_state
+    from fem_ade.scenes.vesicle import get_parameter, set_parameter
+
+    points = sorted((folder / "points").iterdir())
+    states = [load_state(p)[0] for p in points]
+    be = min(states, key=lambda b: abs(get_parameter(b.stepper.params, param) - value))
+    be.stepper.params = be.params = set_parameter(be.stepper.params, param, value)
+    res = solve_steady(be)
+    if not res.converged:
+        return None
+    return reduced_energy(be.diagnostics(), be.params.kappa)
+
+
+def run_branch(root: Path, line: dict, param: str, amplitudes) -> list[dict]:
+    """The m = 2 branch from the line's last point (:func:`fem_ade.campaigns.fourier_branch.
+    follow`), born where the line's blocks located it (else at the point)."""
+    from fem_ade.backends.fem.modes import lowest_mode
+    from fem_ade.backends.fem.newton import NewtonSystem, linearize
+    from fem_ade.campaigns.fourier_branch import follow
+    from fem_ade.campaigns.stability import load_state
+
+    folder = Path(line["folder"])
+    be, _ = load_state(sorted((folder / "points").iterdir())[-1])
+    sys_ = NewtonSystem(be)
+    _, psi = lowest_mode(sys_, linearize(sys_, be.phi), 2)
+    birth = line["bifurcations"][0][param] if line["bifurcations"] else None
+    return follow(be, psi, amplitudes, root / "branch", m0=2, param=param, p_birth=birth,
+                  quiet=False)
+
+
+def compute(root: Path, quick: bool) -> dict:
+    root.mkdir(parents=True, exist_ok=True)
+    if quick:
+        line = _quick_line(root)
+        lines = [line]
+        param, amplitudes = "v", QUICK["amplitudes"]
+    else:
+        lines = [_line(root, *x) for x in LINES]
+        line, param, amplitudes = lines[0], "da0", AMPLITUDES
+    if line["failed"]:
+        return {"lines": lines, "points": []}
+    points = run_branch(root, line, param, amplitudes)
+    for x in points:
+        for other in lines:
+            if not other["failed"]:
+                x[f"e_{other['branch']}"] = axisymmetric_e(Path(other["folder"]), param,
+                                                           x[param])
+    return {"param": param, "lines": lines, "points": points}
+
+
+def _sections(root: Path, line: dict, k: int):
+    """The k-th point's φ on the plane z = z_c, (x, y, φ), and in the meridian planes θ = 0
+    and θ = π/2, ((r, z, φ) each): from its cosines on the line's (r, z) mesh."""
+    import numpy as np
+
+    from fem_ade.campaigns.stability import load_state
+
+    be, _ = load_state(sorted((Path(line["folder"]) / "points").iterdir())[-1])
+    with np.load(root / "branch" / f"{k:04d}.npz") as z:
+        A = np.array(z["cosines"])
+    space = be.space
+    r, zz = space.doflocs
+    w = space.weights * (be.phi + 1.0)
+    zc = float(np.sum(w * zz) / np.sum(w))
+    ar, az = space.axes
+    rs = np.linspace(0.0, ar.nodes[-1], 400)
+    zs = np.linspace(az.nodes[0], az.nodes[-1], 400)
+    at_zc = space.interpolate_to([rs, np.array([zc])])
+    radial = np.array([at_zc(a)[:, 0] for a in A])  # a_j(r, z_c)
+    x = np.linspace(-rs[-1], rs[-1], 401)
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    R, T = np.hypot(X, Y), np.arctan2(Y, X)
+    j = np.arange(A.shape[0])
+    cos = np.cos(2 * j[:, None, None] * T[None])
+    plane = sum(np.interp(R, rs, radial[i], right=1.0) * cos[i] for i in j)
+    grid = space.interpolate_to([rs, zs])
+    meridians = [sum(grid(A[i]) * s ** i for i in j) for s in (1.0, -1.0)]
+    return (X, Y, plane), (rs, zs - zc, meridians)
+
+
+def figure(result: dict, root: Path, out: Path) -> Path:
+    """triaxial.png: Δa₀ against the amplitude; e less the oblate's against Δa₀ (the branch
+    and the prolate); the z = z_c section and the meridians θ = 0, π/2 of three points."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pts, param = result["points"], result["param"]
+    line = result["lines"][0]
+    fig, ax = plt.subplots(1, 4, figsize=(17, 4.2))
+    a = [x["amplitude"] for x in pts]
+    ax[0].plot(a, [x[param] for x in pts], "s-", color="C3", label="triaxial (D2h)")
+    for other, color in zip(result["lines"], ("C0", "C2"), strict=False):
+        for b in other.get("bifurcations", []):
+            ax[0].axhline(b[param], color=color, ls="--",
+                          label=f"{other['branch']}: m = 2 bifurcation")
+    ax[0].set(xlabel="amplitude a (max |ψ| = 1)", ylabel="Δa₀")
+    ax[0].legend(fontsize=8)
+    for key, color, name in (("e", "C3", "triaxial"), ("e_prolate", "C2", "prolate")):
+        xs = [(x[param], x[key] - x["e_oblate"]) for x in pts
+              if x.get(key) is not None and x.get("e_oblate") is not None]
+        if xs:
+            ax[1].plot(*zip(*xs, strict=True), "o-" if name == "prolate" else "s-",
+                       color=color, ms=4, label=name)
+    ax[1].axhline(0.0, color="C0", lw=1, label="oblate")
+    ax[1].set(xlabel="Δa₀", ylabel="e − e_oblate")
+    ax[1].legend(fontsize=8)
+    shown = sorted({0, len(pts) // 2, len(pts) - 1})
+    for k, color in zip(shown, ("C0", "C1", "C3"), strict=False):
+        (X, Y, plane), (rs, zs, mer) = _sections(root, line, k)
+        ax[2].contour(X, Y, plane, [0.0], colors=color)
+        for m, ls in zip(mer, ("-", "--"), strict=True):
+            ax[3].contour(rs, zs, m.T, [0.0], colors=color, linestyles=ls)
+            ax[3].contour(-rs, zs, m.T, [0.0], colors=color, linestyles=ls)
+        ax[2].plot([], [], color=color, label=f"a = {pts[k]['amplitude']:g}")
+    ax[2].set(aspect="equal", title="z = z_c (equator)", xlabel="x", ylabel="y")
+    ax[2].legend(fontsize=8)
+    ax[3].set(aspect="equal", title="meridians: θ = 0 (solid), π/2 (dashed)",
+              xlabel="r", ylabel="z − z_c")
+    fig.tight_layout()
+    path = out / "triaxial.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _fmt(x, spec: str) -> str:
+    return "–" if x is None else format(x, spec)
+
+
+def report(result: dict, out: Path, suffix: str) -> None:
+    """triaxial.md: the lines' bifurcations, the branch's table, what it shows."""
+    pts, param = result["points"], result.get("param", "da0")
+    lines = ["# The triaxial branch of the v = 0.7 window (Fourier–(r, z))", "",
+             "Made by `python studies/triaxial.py` (issue 44); the method and the "
+             "hypothesis: its docstring. e = (W + G)/W_sphere.", "", "## The (r, z) lines", ""]
+    for ln in result["lines"]:
+        if ln["failed"]:
+            lines.append(f"- {ln['branch']}: failed: {ln['failed']}")
+            continue
+        bif = ", ".join(f"{param} = {b[param]:.5f}" for b in ln["bifurcations"]) or "none"
+        lines.append(f"- {ln['branch']}: {len(ln['rows'])} points; m = 2 bifurcation: {bif}")
+    lines += ["", "## The branch", "",
+              f"| a | {param} | e | e − e_oblate | e − e_prolate | n_θ | cosines j = 1, 2, 3 "
+              "| solves | s |", "|---|---|---|---|---|---|---|---|---|"]
+    for x in pts:
+        eo, ep = x.get("e_oblate"), x.get("e_prolate")
+        c = x["cosines"] + [0.0] * 4
+        lines.append(
+            f"| {x['amplitude']:g} | {x[param]:.7f} | {x['e']:.7f} | "
+            f"{_fmt(None if eo is None else x['e'] - eo, '.2e')} | "
+            f"{_fmt(None if ep is None else x['e'] - ep, '.2e')} | {x['n_theta']} | "
+            f"{c[1]:.3g}, {c[2]:.3g}, {c[3]:.3g} | {x['solves']} | {x['seconds']:.0f} |")
+    if not suffix and pts:
+        lines += ["", "![the branch](triaxial.png)"]
+    write_report(out, f"triaxial{suffix}", lines)
+
+
+def main(argv=None) -> dict:
+    ap = study_parser(__doc__, OUT, quick="the oblate at eps = 0.04, two amplitudes in v",
+                      report_only="rewrite the report from triaxial.json")
+    args = ap.parse_args(argv)
+    suffix = "_quick" if args.quick else ""
+    root = args.out / f"triaxial{suffix}"
+    result = results(args, "triaxial", lambda: compute(root, args.quick))
+    if not args.report_only and not args.quick and result["points"]:
+        figure(result, root, args.out)
+    report(result, args.out, suffix)
+    return result
+
+
+if __name__ == "__main__":
+    main()
