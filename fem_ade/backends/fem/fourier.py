@@ -242,10 +242,12 @@ class FourierNewtonSystem(NewtonSystem):
 
 class ModeBlocks:
     """The block-diagonal operator of the modes, factored: mode 0 the (r, z) H with the θ-mean
-    coefficients (α, γ on the (r, z) nodes), mode j ≥ 1 its block m = j m₀ off the axis;
-    ``solve`` applies its inverse to a field (module docstring)."""
+    coefficients (α, γ on the (r, z) nodes), mode j ≥ 1 its block m = j m₀ off the axis
+    (less σP where ``sigma``, P = (a, c) the bulk's); ``solve`` applies its inverse to a
+    field (module docstring)."""
 
-    def __init__(self, space: FourierSpace, ke: float, alpha, gamma, c0: float):
+    def __init__(self, space: FourierSpace, ke: float, alpha, gamma, c0: float,
+                 sigma: float = 0.0, P: tuple[float, float] | None = None):
         from fem_ade.backends.fem.direct import HessianFactor, node_order
 
         self.space = space
@@ -253,13 +255,13 @@ class ModeBlocks:
         shape = rz.shape
         co0 = {"alpha": alpha, "gamma": gamma, "c0": c0}
         self.factors = [HessianFactor(space.K_rz, rz.weights, ke, co0,
-                                      node_order(shape, rz.order))]
+                                      node_order(shape, rz.order), sigma=sigma, P=P)]
         co = {"alpha": np.asarray(alpha)[off], "gamma": np.asarray(gamma)[off], "c0": c0}
         nodes = node_order(shape, rz.order, off)
         Koo = sp.csr_matrix(space.K_rz)[off][:, off].tocsr()
         for m in space.m[1:]:
             self.factors.append(HessianFactor(Koo + float(m * m) * space.M, rz.weights[off],
-                                              ke, co, nodes))
+                                              ke, co, nodes, sigma=sigma, P=P))
         self.negative = [f.negative for f in self.factors]
 
     def solve(self, b: np.ndarray) -> np.ndarray:
@@ -278,20 +280,22 @@ class ModeBlocks:
 
 
 class KKTSolver:
-    """[[H_L, C], [Cᵀ, 0]] at a linearization, by GMRES preconditioned by the same system
+    """[[H_L − σP, C], [Cᵀ, 0]] at a linearization, by GMRES preconditioned by the same system
     with the modes' blocks for H_L (:class:`ModeBlocks`, its borders by
     :class:`fem_ade.backends.fem.direct.Bordered`); ``solve(b, c)`` → (x, multipliers)."""
 
-    def __init__(self, sys_: FourierNewtonSystem, lin, rtol: float = 1e-8):
+    def __init__(self, sys_: FourierNewtonSystem, lin, rtol: float = 1e-8,
+                 sigma: float = 0.0):
         from fem_ade.backends.fem.direct import Bordered
 
         t0 = time.perf_counter()
-        self.sys, self.lin, self.rtol = sys_, lin, rtol
+        self.sys, self.lin, self.rtol, self.sigma = sys_, lin, rtol, sigma
         step, space = sys_.step, sys_.space
         co = step.hessian_coefficients(lin.phi, lin.mu, lin.Kphi, lin.lam[0], lin.lam[1])
         mean = [theta_mean(space, np.broadcast_to(co[k], lin.phi.shape)) for k in ("alpha",
                                                                                   "gamma")]
-        self.blocks = ModeBlocks(space, sys_.bulk()[2], mean[0], mean[1], co["c0"])
+        a, c, ke = sys_.bulk()
+        self.blocks = ModeBlocks(space, ke, mean[0], mean[1], co["c0"], sigma, (a, c))
         self.rank_one = co["rank_one"]
         self.C = lin.C
         self.prec = Bordered(self._blocks_solve, [b for _, b in self.rank_one],
@@ -311,6 +315,8 @@ class KKTSolver:
         v, nu = x[:N], x[N:]
         top = (step.hessian_vector(lin.phi, lin.mu, lin.Kphi, v)
                + step.constraint_hessian_vector(lin.phi, lin.Kphi, v, lin.lam[0], lin.lam[1]))
+        if self.sigma:
+            top = top - self.sigma * self.sys.P(v)
         for nj, cj in zip(nu, self.C, strict=True):
             top = top + nj * cj
         return np.concatenate([top, [global_dot(c, v) for c in self.C]])
@@ -353,3 +359,43 @@ def theta_mean(space: FourierSpace, x: np.ndarray) -> np.ndarray:
     out[space.axis] = x[:space.na]
     out[space.off] = x[space.na:].reshape(space.n_theta, space.no).mean(axis=0)
     return out
+
+
+def lowest(state: FourierState, k: int = 3, sigma: float = -1e-5,
+           tol: float = 1e-8) -> np.ndarray:
+    """The ``k`` eigenvalues of H v = λ P v nearest ``sigma`` on the constrained space (V, A
+    held, P-orthogonal to the translation along z as the blocks are; no amplitude pin) of a steady ``state``: its stability
+    among the fields of its space (the shape's mirror symmetries), by shift-invert Lanczos
+    (ARPACK) with the bordered H − σP solved by GMRES (:class:`KKTSolver`)."""
+    from scipy.sparse.linalg import LinearOperator, eigsh
+
+    from fem_ade.backends.fem.newton import linearize
+
+    sys_ = FourierNewtonSystem(state)
+    t = translation(state.space, state.phi)  # the blocks' zero mode of m = 0: P·∂_zφ
+    sys_.translations = [sys_.P(t) / math.sqrt(float(t @ sys_.P(t)))]
+    lin = linearize(sys_, state.phi)
+    solver = KKTSolver(sys_, lin, rtol=tol * 1e-2, sigma=sigma)
+    n = lin.phi.size
+    step = sys_.step
+
+    def H(x):
+        return (step.hessian_vector(lin.phi, lin.mu, lin.Kphi, x)
+                + step.constraint_hessian_vector(lin.phi, lin.Kphi, x, lin.lam[0], lin.lam[1]))
+
+    ops = [LinearOperator((n, n), matvec=f, dtype=float) for f in
+           (H, sys_.P, lambda x: solver.solve(np.ravel(x))[0])]
+    v0 = solver.solve(sys_.P(np.random.default_rng(1).standard_normal(n)))[0]
+    found = eigsh(ops[0], k=k, M=ops[1], sigma=sigma, which="LM", OPinv=ops[2], v0=v0,
+                  tol=tol, ncv=max(2 * k + 2, 8), return_eigenvectors=False)
+    return np.sort(np.asarray(found))
+
+
+def translation(space: FourierSpace, phi: np.ndarray) -> np.ndarray:
+    """∂_zφ on a Fourier space (each angle's (r, z) field differentiated along z)."""
+    from fem_ade.backends.fem.tensor import along
+
+    rz = space.rz
+    S = space.slices(phi).reshape((space.n_theta,) + tuple(rz.shape))
+    dz = along(rz.axes[1].derivative, S, 2).reshape(space.n_theta, -1)
+    return space.from_slices(dz)
