@@ -364,9 +364,10 @@ def theta_mean(space: FourierSpace, x: np.ndarray) -> np.ndarray:
 def lowest(state: FourierState, k: int = 3, sigma: float = -1e-5,
            tol: float = 1e-8) -> np.ndarray:
     """The ``k`` eigenvalues of H v = λ P v nearest ``sigma`` on the constrained space (V, A
-    held, P-orthogonal to the translation along z as the blocks are; no amplitude pin) of a steady ``state``: its stability
-    among the fields of its space (the shape's mirror symmetries), by shift-invert Lanczos
-    (ARPACK) with the bordered H − σP solved by GMRES (:class:`KKTSolver`)."""
+    held, P-orthogonal to the translation along z as the blocks are; no amplitude pin) of a
+    steady ``state``: its stability among the fields of its space (the shape's mirror
+    symmetries), by shift-invert Lanczos (ARPACK) with the bordered H − σP solved by GMRES
+    (:class:`KKTSolver`)."""
     from scipy.sparse.linalg import LinearOperator, eigsh
 
     from fem_ade.backends.fem.newton import linearize
