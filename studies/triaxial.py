@@ -44,7 +44,13 @@ V, KBAR, R0, EPS, N = 0.7, 1.4, 0.195, 0.01, 400
 #: the lines: (branch, Δa₀ from, to, step)
 LINES = (("oblate", 1.08, 1.10, 0.01), ("prolate", 1.08, 1.10, 0.01))
 #: the branch's amplitudes (max |ψ| = 1; φ's range is 2)
-AMPLITUDES = (0.05, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.3, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6, 4.0)
+AMPLITUDES = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.4, 1.8, 2.4, 3.0, 4.0)
+#: the branch born at the prolate's m = 2 bifurcation (the window's other end), in the
+#: prolate's own frame: its first amplitudes
+PROLATE_AMPLITUDES = (0.05, 0.1, 0.2)
+#: the points whose stability in the sector (the fields with the mirror planes x = 0, y = 0:
+#: cos 2jθ) is computed (their amplitudes), and the eigenvalues nearest SIGMA found
+STABILITY, SIGMA, K_LOWEST = (0.05,), -2e-6, 3
 #: the quick mode: the oblate at ε = 0.04, v = 0.85, R₀ = 0.25 (unstable in m = 2), two
 #: amplitudes, in v
 QUICK = {"v": 0.85, "eps": 0.04, "R0": 0.25, "amplitudes": (0.1, 0.2)}
@@ -98,9 +104,11 @@ def axisymmetric_e(folder: Path, param: str, value: float) -> float | None:
     return reduced_energy(be.diagnostics(), be.params.kappa)
 
 
-def run_branch(root: Path, line: dict, param: str, amplitudes) -> list[dict]:
+def run_branch(root: Path, line: dict, param: str, amplitudes,
+               name: str = "branch") -> list[dict]:
     """The m = 2 branch from the line's last point (:func:`fem_ade.campaigns.fourier_branch.
-    follow`), born where the line's blocks located it (else at the point)."""
+    follow`), born where the line's blocks located it (else at the point), kept in
+    ``root/name``."""
     from fem_ade.backends.fem.modes import lowest_mode
     from fem_ade.backends.fem.newton import NewtonSystem, linearize
     from fem_ade.campaigns.fourier_branch import follow
@@ -111,8 +119,30 @@ def run_branch(root: Path, line: dict, param: str, amplitudes) -> list[dict]:
     sys_ = NewtonSystem(be)
     _, psi = lowest_mode(sys_, linearize(sys_, be.phi), 2)
     birth = line["bifurcations"][0][param] if line["bifurcations"] else None
-    return follow(be, psi, amplitudes, root / "branch", m0=2, param=param, p_birth=birth,
+    return follow(be, psi, amplitudes, root / name, m0=2, param=param, p_birth=birth,
                   quiet=False)
+
+
+def sector_lowest(root: Path, line: dict, k: int, row: dict, param: str) -> list[float]:
+    """The K_LOWEST eigenvalues nearest SIGMA of branch point ``k`` in its sector
+    (:func:`fem_ade.backends.fem.fourier.lowest`), from its cosines on the line's mesh."""
+    import numpy as np
+
+    from fem_ade.backends.fem.fourier import FourierState, lowest
+    from fem_ade.campaigns.stability import load_state
+
+    kept = root / "branch" / f"{k:04d}.lowest.json"  # kept: 650 s at n_θ = 4
+    if kept.is_file():
+        return json.loads(kept.read_text())
+    be, _ = load_state(sorted((Path(line["folder"]) / "points").iterdir())[-1])
+    with np.load(root / "branch" / f"{k:04d}.npz") as z:
+        A = np.array(z["cosines"])
+    st = FourierState.of(be, 2, A.shape[0])
+    st.phi = st.space.from_modes({j: A[j] for j in range(A.shape[0])})
+    st.set_parameter(param, row[param])
+    found = [float(x) for x in lowest(st, k=K_LOWEST, sigma=SIGMA)]
+    kept.write_text(json.dumps(found))
+    return found
 
 
 def compute(root: Path, quick: bool) -> dict:
@@ -127,12 +157,17 @@ def compute(root: Path, quick: bool) -> dict:
     if line["failed"]:
         return {"lines": lines, "points": []}
     points = run_branch(root, line, param, amplitudes)
-    for x in points:
+    for k, x in enumerate(points):
+        if not quick and x["amplitude"] in STABILITY:
+            x["lowest"] = sector_lowest(root, line, k, x, param)
+    other_end = [] if quick or lines[1]["failed"] else run_branch(
+        root, lines[1], param, PROLATE_AMPLITUDES, name="branch-prolate")
+    for x in points + other_end:
         for other in lines:
             if not other["failed"]:
                 x[f"e_{other['branch']}"] = axisymmetric_e(Path(other["folder"]), param,
                                                            x[param])
-    return {"param": param, "lines": lines, "points": points}
+    return {"param": param, "lines": lines, "points": points, "prolate_points": other_end}
 
 
 def _sections(root: Path, line: dict, k: int):
@@ -159,7 +194,8 @@ def _sections(root: Path, line: dict, k: int):
     R, T = np.hypot(X, Y), np.arctan2(Y, X)
     j = np.arange(A.shape[0])
     cos = np.cos(2 * j[:, None, None] * T[None])
-    plane = sum(np.interp(R, rs, radial[i], right=1.0) * cos[i] for i in j)
+    plane = sum(np.interp(R, rs, radial[i]) * cos[i] for i in j)
+    plane[R > rs[-1]] = np.nan  # beyond the (r, z) domain
     grid = space.interpolate_to([rs, zs])
     meridians = [sum(grid(A[i]) * s ** i for i in j) for s in (1.0, -1.0)]
     return (X, Y, plane), (rs, zs - zc, meridians)
@@ -169,6 +205,7 @@ def figure(result: dict, root: Path, out: Path) -> Path:
     """triaxial.png: Δa₀ against the amplitude; e less the oblate's against Δa₀ (the branch
     and the prolate); the z = z_c section and the meridians θ = 0, π/2 of three points."""
     import matplotlib
+    import numpy as np
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -177,16 +214,22 @@ def figure(result: dict, root: Path, out: Path) -> Path:
     line = result["lines"][0]
     fig, ax = plt.subplots(1, 4, figsize=(17, 4.2))
     a = [x["amplitude"] for x in pts]
-    ax[0].plot(a, [x[param] for x in pts], "s-", color="C3", label="triaxial (D2h)")
+    ax[0].plot(a, [x[param] for x in pts], "s-", color="C3", label="from the oblate")
+    other = result.get("prolate_points") or []
+    if other:
+        ax[0].plot([x["amplitude"] for x in other], [x[param] for x in other], "^-",
+                   color="C1", label="from the prolate (its frame)")
     for other, color in zip(result["lines"], ("C0", "C2"), strict=False):
         for b in other.get("bifurcations", []):
             ax[0].axhline(b[param], color=color, ls="--",
                           label=f"{other['branch']}: m = 2 bifurcation")
     ax[0].set(xlabel="amplitude a (max |ψ| = 1)", ylabel="Δa₀")
     ax[0].legend(fontsize=8)
-    for key, color, name in (("e", "C3", "triaxial"), ("e_prolate", "C2", "prolate")):
-        xs = [(x[param], x[key] - x["e_oblate"]) for x in pts
-              if x.get(key) is not None and x.get("e_oblate") is not None]
+    for key, color, name, rows in (("e", "C3", "from the oblate", pts),
+                                   ("e", "C1", "from the prolate", other),
+                                   ("e_prolate", "C2", "prolate", pts + other)):
+        xs = sorted((x[param], x[key] - x["e_oblate"]) for x in rows
+                    if x.get(key) is not None and x.get("e_oblate") is not None)
         if xs:
             ax[1].plot(*zip(*xs, strict=True), "o-" if name == "prolate" else "s-",
                        color=color, ms=4, label=name)
@@ -194,14 +237,20 @@ def figure(result: dict, root: Path, out: Path) -> Path:
     ax[1].set(xlabel="Δa₀", ylabel="e − e_oblate")
     ax[1].legend(fontsize=8)
     shown = sorted({0, len(pts) // 2, len(pts) - 1})
+    sizes = []
     for k, color in zip(shown, ("C0", "C1", "C3"), strict=False):
         (X, Y, plane), (rs, zs, mer) = _sections(root, line, k)
+        inside = np.nan_to_num(plane, nan=-1.0) > 0
+        sizes.append({"extent": float(np.max(np.hypot(X, Y)[inside]))})
         ax[2].contour(X, Y, plane, [0.0], colors=color)
         for m, ls in zip(mer, ("-", "--"), strict=True):
             ax[3].contour(rs, zs, m.T, [0.0], colors=color, linestyles=ls)
             ax[3].contour(-rs, zs, m.T, [0.0], colors=color, linestyles=ls)
         ax[2].plot([], [], color=color, label=f"a = {pts[k]['amplitude']:g}")
-    ax[2].set(aspect="equal", title="z = z_c (equator)", xlabel="x", ylabel="y")
+    size = 1.15 * max(x["extent"] for x in sizes)
+    ax[2].set(aspect="equal", title="z = z_c (equator)", xlabel="x", ylabel="y",
+              xlim=(-size, size), ylim=(-size, size))
+    ax[3].set(xlim=(-size, size), ylim=(-0.6 * size, 0.6 * size))
     ax[2].legend(fontsize=8)
     ax[3].set(aspect="equal", title="meridians: θ = 0 (solid), π/2 (dashed)",
               xlabel="r", ylabel="z − z_c")
@@ -216,6 +265,20 @@ def _fmt(x, spec: str) -> str:
     return "–" if x is None else format(x, spec)
 
 
+def _branch_table(pts: list[dict], param: str) -> list[str]:
+    rows = [f"| a | {param} | e | e − e_oblate | e − e_prolate | n_θ | cosines j = 1, 2, 3 "
+            "| solves | s |", "|---|---|---|---|---|---|---|---|---|"]
+    for x in pts:
+        eo, ep = x.get("e_oblate"), x.get("e_prolate")
+        c = x["cosines"] + [0.0] * 4
+        rows.append(
+            f"| {x['amplitude']:g} | {x[param]:.7f} | {x['e']:.7f} | "
+            f"{_fmt(None if eo is None else x['e'] - eo, '.2e')} | "
+            f"{_fmt(None if ep is None else x['e'] - ep, '.2e')} | {x['n_theta']} | "
+            f"{c[1]:.3g}, {c[2]:.3g}, {c[3]:.3g} | {x['solves']} | {x['seconds']:.0f} |")
+    return rows
+
+
 def report(result: dict, out: Path, suffix: str) -> None:
     """triaxial.md: the lines' bifurcations, the branch's table, what it shows."""
     pts, param = result["points"], result.get("param", "da0")
@@ -228,17 +291,19 @@ def report(result: dict, out: Path, suffix: str) -> None:
             continue
         bif = ", ".join(f"{param} = {b[param]:.5f}" for b in ln["bifurcations"]) or "none"
         lines.append(f"- {ln['branch']}: {len(ln['rows'])} points; m = 2 bifurcation: {bif}")
-    lines += ["", "## The branch", "",
-              f"| a | {param} | e | e − e_oblate | e − e_prolate | n_θ | cosines j = 1, 2, 3 "
-              "| solves | s |", "|---|---|---|---|---|---|---|---|---|"]
-    for x in pts:
-        eo, ep = x.get("e_oblate"), x.get("e_prolate")
-        c = x["cosines"] + [0.0] * 4
-        lines.append(
-            f"| {x['amplitude']:g} | {x[param]:.7f} | {x['e']:.7f} | "
-            f"{_fmt(None if eo is None else x['e'] - eo, '.2e')} | "
-            f"{_fmt(None if ep is None else x['e'] - ep, '.2e')} | {x['n_theta']} | "
-            f"{c[1]:.3g}, {c[2]:.3g}, {c[3]:.3g} | {x['solves']} | {x['seconds']:.0f} |")
+    lines += ["", "## The branch born at the oblate's m = 2 bifurcation", ""]
+    lines += _branch_table(pts, param)
+    stab = [x for x in pts if "lowest" in x]
+    if stab:
+        lines += ["", "Its stability in the sector (the fields with the mirror planes x = 0, "
+                  f"y = 0), the {K_LOWEST} eigenvalues of H v = λ P v nearest {SIGMA:g}:", ""]
+        lines += [f"- a = {x['amplitude']:g}: " + ", ".join(f"{v:.3g}" for v in x["lowest"])
+                  for x in stab]
+    if result.get("prolate_points"):
+        lines += ["", "## The branch born at the prolate's m = 2 bifurcation", "",
+                  "In the prolate's frame (its axis the long one), along its own m = 2 "
+                  "eigenvector.", ""]
+        lines += _branch_table(result["prolate_points"], param)
     if not suffix and pts:
         lines += ["", "![the branch](triaxial.png)"]
     write_report(out, f"triaxial{suffix}", lines)
