@@ -22,20 +22,19 @@ m = 2 below 1.0957: between them no axisymmetric shape is stable. The octant at 
 window, and lies below both there: the window's lowest shape is a triaxial ellipsoid.
 **Control**: the branch's Δa₀ as a → 0 is the oblate's bifurcation as the (r, z) blocks
 locate it, and its e there is the oblate's.
+
+    python studies/triaxial.py --out studies/results   # ~2.5 h on one core (the notes)
+    python studies/triaxial.py --quick                 # the ε = 0.04 oblate, ~45 s
 """
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _lib.cli import one_thread, results, study_parser, write_report  # noqa: E402
+from _lib.cli import one_thread, results, study_parser, write_report
 
 one_thread()
 
 import json  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 from _lib.branches import branch_rows, make_branch  # noqa: E402
 
@@ -43,8 +42,9 @@ OUT = Path("runs") / "studies"
 V, KBAR, R0, EPS, N = 0.7, 1.4, 0.195, 0.01, 400
 #: the lines: (branch, Δa₀ from, to, step)
 LINES = (("oblate", 1.08, 1.10, 0.01), ("prolate", 1.08, 1.10, 0.01))
-#: the branch's amplitudes (max |ψ| = 1; φ's range is 2)
-AMPLITUDES = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.4, 1.8, 2.4, 3.0, 4.0)
+#: the branch's amplitudes (max |ψ| = 1; φ's range is 2): the next, 0.7, was stopped after
+#: 39 min of one core (the notes' cost)
+AMPLITUDES = (0.05, 0.1, 0.2, 0.4)
 #: the branch born at the prolate's m = 2 bifurcation (the window's other end), in the
 #: prolate's own frame: its first amplitudes
 PROLATE_AMPLITUDES = (0.05, 0.1, 0.2)
@@ -123,7 +123,8 @@ def run_branch(root: Path, line: dict, param: str, amplitudes,
                   quiet=False)
 
 
-def sector_lowest(root: Path, line: dict, k: int, row: dict, param: str) -> list[float]:
+def sector_lowest(root: Path, line: dict, k: int, row: dict, param: str,
+                  name: str = "branch") -> list[float]:
     """The K_LOWEST eigenvalues nearest SIGMA of branch point ``k`` in its sector
     (:func:`fem_ade.backends.fem.fourier.lowest`), from its cosines on the line's mesh."""
     import numpy as np
@@ -131,11 +132,11 @@ def sector_lowest(root: Path, line: dict, k: int, row: dict, param: str) -> list
     from fem_ade.backends.fem.fourier import FourierState, lowest
     from fem_ade.campaigns.stability import load_state
 
-    kept = root / "branch" / f"{k:04d}.lowest.json"  # kept: 650 s at n_θ = 4
+    kept = root / name / f"{k:04d}.lowest.json"  # kept: 650 s at n_θ = 4
     if kept.is_file():
         return json.loads(kept.read_text())
     be, _ = load_state(sorted((Path(line["folder"]) / "points").iterdir())[-1])
-    with np.load(root / "branch" / f"{k:04d}.npz") as z:
+    with np.load(root / name / f"{k:04d}.npz") as z:
         A = np.array(z["cosines"])
     st = FourierState.of(be, 2, A.shape[0])
     st.phi = st.space.from_modes({j: A[j] for j in range(A.shape[0])})
@@ -162,6 +163,9 @@ def compute(root: Path, quick: bool) -> dict:
             x["lowest"] = sector_lowest(root, line, k, x, param)
     other_end = [] if quick or lines[1]["failed"] else run_branch(
         root, lines[1], param, PROLATE_AMPLITUDES, name="branch-prolate")
+    for k, x in enumerate(other_end):
+        if x["amplitude"] in STABILITY:
+            x["lowest"] = sector_lowest(root, lines[1], k, x, param, "branch-prolate")
     for x in points + other_end:
         for other in lines:
             if not other["failed"]:
@@ -202,8 +206,9 @@ def _sections(root: Path, line: dict, k: int):
 
 
 def figure(result: dict, root: Path, out: Path) -> Path:
-    """triaxial.png: Δa₀ against the amplitude; e less the oblate's against Δa₀ (the branch
-    and the prolate); the z = z_c section and the meridians θ = 0, π/2 of three points."""
+    """triaxial.png: Δa₀ against the amplitude; e less that of the branch each was born from,
+    against the amplitude; the z = z_c section and the meridians θ = 0, π/2 of three points
+    of the oblate's branch."""
     import matplotlib
     import numpy as np
 
@@ -219,23 +224,23 @@ def figure(result: dict, root: Path, out: Path) -> Path:
     if other:
         ax[0].plot([x["amplitude"] for x in other], [x[param] for x in other], "^-",
                    color="C1", label="from the prolate (its frame)")
-    for other, color in zip(result["lines"], ("C0", "C2"), strict=False):
-        for b in other.get("bifurcations", []):
+    for ln, color in zip(result["lines"], ("C0", "C2"), strict=False):
+        for b in ln.get("bifurcations", []):
             ax[0].axhline(b[param], color=color, ls="--",
-                          label=f"{other['branch']}: m = 2 bifurcation")
+                          label=f"{ln['branch']}: m = 2 bifurcation")
     ax[0].set(xlabel="amplitude a (max |ψ| = 1)", ylabel="Δa₀")
     ax[0].legend(fontsize=8)
-    for key, color, name, rows in (("e", "C3", "from the oblate", pts),
-                                   ("e", "C1", "from the prolate", other),
-                                   ("e_prolate", "C2", "prolate", pts + other)):
-        xs = sorted((x[param], x[key] - x["e_oblate"]) for x in rows
-                    if x.get(key) is not None and x.get("e_oblate") is not None)
+    for rows, parent, color, marker in ((pts, "oblate", "C3", "s-"),
+                                        (other, "prolate", "C1", "^-")):
+        xs = [(x["amplitude"], x["e"] - x[f"e_{parent}"]) for x in rows
+              if x.get(f"e_{parent}") is not None]
         if xs:
-            ax[1].plot(*zip(*xs, strict=True), "o-" if name == "prolate" else "s-",
-                       color=color, ms=4, label=name)
-    ax[1].axhline(0.0, color="C0", lw=1, label="oblate")
-    ax[1].set(xlabel="Δa₀", ylabel="e − e_oblate")
-    ax[1].legend(fontsize=8)
+            ax[1].plot(*zip(*xs, strict=True), marker, color=color, ms=4,
+                       label=f"from the {parent}: e − e_{parent}")
+    ax[1].axhline(0.0, color="0.5", lw=1)
+    ax[1].set_yscale("symlog", linthresh=1e-10)
+    ax[1].set(xlabel="amplitude a", ylabel="e less the parent's at the same Δa₀")
+    ax[1].legend(fontsize=8, loc="center right")
     shown = sorted({0, len(pts) // 2, len(pts) - 1})
     sizes = []
     for k, color in zip(shown, ("C0", "C1", "C3"), strict=False):
@@ -256,13 +261,45 @@ def figure(result: dict, root: Path, out: Path) -> Path:
               xlabel="r", ylabel="z − z_c")
     fig.tight_layout()
     path = out / "triaxial.png"
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=80)
     plt.close(fig)
     return path
 
 
 def _fmt(x, spec: str) -> str:
     return "–" if x is None else format(x, spec)
+
+
+def birth(pts: list[dict], param: str) -> tuple[float, float] | None:
+    """(p_b, c) of p = p_b + c a² through the branch's two smallest amplitudes (two points,
+    two unknowns: no residual), the branch's birth by its pitchfork's law; None with fewer
+    points."""
+    if len(pts) < 2:
+        return None
+    (a1, p1), (a2, p2) = sorted((x["amplitude"], x[param]) for x in pts)[:2]
+    c = (p2 - p1) / (a2**2 - a1**2)
+    return p1 - c * a1**2, c
+
+
+def _birth_line(pts: list[dict], param: str, located: list[dict]) -> list[str]:
+    found = birth(pts, param)
+    if found is None:
+        return []
+    where = ", ".join(f"{b[param]:.7f}" for b in located) or "none"
+    side = "up" if found[1] > 0 else "down"
+    return ["", f"The birth, by p = p_b + c a² through the two smallest amplitudes (2 points, "
+            f"exact fit): {param} = {found[0]:.7f}, c = {found[1]:.3e} (the branch goes "
+            f"{side} in {param}); the (r, z) blocks located it at {where}."]
+
+
+def _stability(pts: list[dict]) -> list[str]:
+    stab = [x for x in pts if "lowest" in x]
+    if not stab:
+        return []
+    return ["", "Its stability in the sector (the fields with the mirror planes x = 0, y = 0), "
+            f"the {K_LOWEST} eigenvalues of H v = λ P v nearest {SIGMA:g}:", "",
+            *[f"- a = {x['amplitude']:g}: " + ", ".join(f"{v:.3g}" for v in x["lowest"])
+              for x in stab]]
 
 
 def _branch_table(pts: list[dict], param: str) -> list[str]:
@@ -293,17 +330,16 @@ def report(result: dict, out: Path, suffix: str) -> None:
         lines.append(f"- {ln['branch']}: {len(ln['rows'])} points; m = 2 bifurcation: {bif}")
     lines += ["", "## The branch born at the oblate's m = 2 bifurcation", ""]
     lines += _branch_table(pts, param)
-    stab = [x for x in pts if "lowest" in x]
-    if stab:
-        lines += ["", "Its stability in the sector (the fields with the mirror planes x = 0, "
-                  f"y = 0), the {K_LOWEST} eigenvalues of H v = λ P v nearest {SIGMA:g}:", ""]
-        lines += [f"- a = {x['amplitude']:g}: " + ", ".join(f"{v:.3g}" for v in x["lowest"])
-                  for x in stab]
+    lines += _birth_line(pts, param, result["lines"][0].get("bifurcations", []))
+    lines += _stability(pts)
     if result.get("prolate_points"):
         lines += ["", "## The branch born at the prolate's m = 2 bifurcation", "",
                   "In the prolate's frame (its axis the long one), along its own m = 2 "
                   "eigenvector.", ""]
         lines += _branch_table(result["prolate_points"], param)
+        lines += _birth_line(result["prolate_points"], param,
+                             result["lines"][1].get("bifurcations", []))
+        lines += _stability(result["prolate_points"])
     if not suffix and pts:
         lines += ["", "![the branch](triaxial.png)"]
     write_report(out, f"triaxial{suffix}", lines)

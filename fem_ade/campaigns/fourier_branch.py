@@ -81,10 +81,16 @@ class AmplitudeBranch:
         from fem_ade.backends.fem.newton import NewtonError, linearize, solve_steady
 
         self.state.set_parameter(self.param, p)
+        t0, made = time.perf_counter(), len(self.system.gmres_iterations)
         res = solve_steady(self.state, system=self.system)
         if not res.converged:
             raise NewtonError(f"Newton at {self.param} = {p:.8g}: {res.message}")
-        return float(linearize(self.system, self.state.phi).lam[3]), res
+        lam = float(linearize(self.system, self.state.phi).lam[3])
+        if not self.quiet:  # a point takes minutes: each solve's progress
+            print(f"    {self.param} = {p:.8f}: pin's multiplier {lam:.3e}, Newton "
+                  f"{res.iterations}, GMRES {self.system.gmres_iterations[made:]}, "
+                  f"{time.perf_counter() - t0:.0f} s", flush=True)
+        return lam, res
 
     def _predict(self, a: float) -> tuple[float, float]:
         """Set the field to the predictor of amplitude ``a``; the secant's two parameters."""
