@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_ade.model.params import ModelError
+from fem_ade.store.output import write_json_atomic
 
 #: n_θ is doubled while max |a_{n_θ−1}| > TAIL · max |a₁|
 TAIL = 1e-3
@@ -194,7 +195,5 @@ def follow(be, psi, amplitudes, out: Path, *, m0: int, param: str = "da0",
         row = branch.point(a)
         np.savez_compressed(field.with_suffix(".tmp.npz"), cosines=branch._fields[-1])
         field.with_suffix(".tmp.npz").replace(field)
-        tmp = done.with_suffix(".tmp")
-        tmp.write_text(json.dumps(row, indent=1))
-        tmp.replace(done)
+        write_json_atomic(done, row, indent=1)
     return branch.points

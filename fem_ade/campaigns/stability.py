@@ -192,7 +192,7 @@ def _tangent_operators(be):
     from scipy.sparse.linalg import LinearOperator
 
     from fem_ade.backends.fem.modes import p_orthogonal, zero_modes
-    from fem_ade.backends.fem.newton import NewtonSystem, linearize
+    from fem_ade.backends.fem.newton import NewtonSystem, lagrangian_hessian_vector, linearize
 
     sys_ = NewtonSystem(be)
     lin = linearize(sys_, be.phi.copy())
@@ -208,8 +208,7 @@ def _tangent_operators(be):
     def H(x):
         x = np.ravel(x)
         y = x - Y @ (G @ (C.T @ x))
-        h = (step.hessian_vector(lin.phi, lin.mu, lin.Kphi, y)
-             + step.constraint_hessian_vector(lin.phi, lin.Kphi, y, lin.lam[0], lin.lam[1]))
+        h = lagrangian_hessian_vector(step, lin, y)
         return h - C @ (G @ (Y.T @ h)) + OFF_TANGENT * (C @ (G @ (C.T @ x)))
 
     return tuple(LinearOperator((N, N), matvec=f, dtype=float)

@@ -48,7 +48,6 @@ import scipy.sparse as sp
 from scipy import fft
 
 from fem_ade.backends.fem.newton import NewtonSystem
-from fem_ade.backends.fem.solve import global_dot
 from fem_ade.model.params import ModelError
 
 #: GMRES of the bordered Newton system: its restart length and its most iterations; a
@@ -204,8 +203,7 @@ class FourierNewtonSystem(NewtonSystem):
     def __init__(self, be: FourierState, linear: str = "auto", pins=()):
         self.be, self.space, self.step = be, be.space, be.stepper
         self.w = self.space.weights
-        z = self.space.doflocs[1]
-        self.translations = [self.w * (z - float(np.sum(self.w * z) / np.sum(self.w))),
+        self.translations = [*self._translations(),
                              *[np.asarray(p, dtype=float) for p in pins]]
         self.direct, self.uses_coarse, self.coarse, self._K = True, False, None, None
         self._P = None
@@ -316,16 +314,11 @@ class KKTSolver:
         self.iterations: list[int] = []
 
     def apply(self, x: np.ndarray) -> np.ndarray:
-        lin, step = self.lin, self.sys.step
-        N = lin.phi.size
-        v, nu = x[:N], x[N:]
-        top = (step.hessian_vector(lin.phi, lin.mu, lin.Kphi, v)
-               + step.constraint_hessian_vector(lin.phi, lin.Kphi, v, lin.lam[0], lin.lam[1]))
-        if self.sigma:
-            top = top - self.sigma * self.sys.P(v)
-        for nj, cj in zip(nu, self.C, strict=True):
-            top = top + nj * cj
-        return np.concatenate([top, [global_dot(c, v) for c in self.C]])
+        from fem_ade.backends.fem.newton import kkt_apply
+
+        sigma, P = self.sigma, self.sys.P
+        return kkt_apply(self.sys.step, self.lin, self.C, x,
+                         (lambda v: sigma * P(v)) if sigma else None)
 
     def solve(self, b: np.ndarray, c: np.ndarray | None = None):
         from scipy.sparse.linalg import LinearOperator, gmres
@@ -384,7 +377,7 @@ def lowest(state: FourierState, k: int = 3, sigma: float = -1e-5,
     (:class:`KKTSolver`)."""
     from scipy.sparse.linalg import LinearOperator, eigsh
 
-    from fem_ade.backends.fem.newton import linearize
+    from fem_ade.backends.fem.newton import lagrangian_hessian_vector, linearize
 
     sys_ = FourierNewtonSystem(state)
     t = translation(state.space, state.phi)  # the blocks' zero mode of m = 0: P·∂_zφ
@@ -392,11 +385,9 @@ def lowest(state: FourierState, k: int = 3, sigma: float = -1e-5,
     lin = linearize(sys_, state.phi)
     solver = KKTSolver(sys_, lin, rtol=tol * 1e-2, sigma=sigma)
     n = lin.phi.size
-    step = sys_.step
 
     def H(x):
-        return (step.hessian_vector(lin.phi, lin.mu, lin.Kphi, x)
-                + step.constraint_hessian_vector(lin.phi, lin.Kphi, x, lin.lam[0], lin.lam[1]))
+        return lagrangian_hessian_vector(sys_.step, lin, x)
 
     ops = [LinearOperator((n, n), matvec=f, dtype=float) for f in
            (H, sys_.P, lambda x: solver.solve(np.ravel(x))[0])]

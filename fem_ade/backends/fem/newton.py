@@ -177,15 +177,15 @@ class NewtonSystem:
     # -- the functionals ---------------------------------------------------------------------
     def _translations(self) -> list[np.ndarray]:
         """Gradients of the linear functionals that pin the rigid motions (the pins):
-        z in the axisymmetric geometry; in 3D P·u for each rigid motion u of the starting
-        state (the translations ∂ₐφ and the rotations about its centroid, made P-orthogonal
-        and normalized, a rotation about an axis of symmetry left out:
+        z in the axisymmetric and Fourier–(r, z) geometries; in 3D P·u for each rigid motion u
+        of the starting state (the translations ∂ₐφ and the rotations about its centroid, made
+        P-orthogonal and normalized, a rotation about an axis of symmetry left out:
         :func:`fem_ade.backends.fem.modes.rigid_motions`, :func:`~fem_ade.backends.fem.
         modes.p_orthogonal`), so that no Newton correction moves or turns the shape. The
         continuous problem has them as zero modes; the cubic mesh pins them with a small
         energy of either sign, which left Newton (and a continuation's tangent) to drift
         along them. None in 2D, and none in the octant (no rigid motion keeps its mirrors)."""
-        if getattr(self.be, "geometry", "cartesian") == "axisymmetric":
+        if getattr(self.be, "geometry", "cartesian") in ("axisymmetric", "fourier"):
             z = self.space.doflocs[1]
             return [self.w * (z - float(np.sum(self.w * z) / np.sum(self.w)))]
         if self.space.dim != 3 or getattr(self.be, "geometry", "") == "octant":
@@ -310,6 +310,25 @@ def linearize(sys_: NewtonSystem, phi: np.ndarray) -> Linearization:
     return Linearization(phi, mu, Kphi, E, C, lam, grad, sys_.constraint_values(phi, Kphi))
 
 
+def lagrangian_hessian_vector(step, lin, v: np.ndarray) -> np.ndarray:
+    """H_L v = ∇²E_h v + (λ_V∇²V_h + λ_A∇²A_h) v at a linearization ``lin`` (its φ, μ, Kφ
+    and multipliers λ), exactly."""
+    return (step.hessian_vector(lin.phi, lin.mu, lin.Kphi, v)
+            + step.constraint_hessian_vector(lin.phi, lin.Kphi, v, lin.lam[0], lin.lam[1]))
+
+
+def kkt_apply(step, lin, C: list, x: np.ndarray, shift=None) -> np.ndarray:
+    """[[H_L − S, C], [Cᵀ, 0]] x at ``lin``: x = (v, ν), ``shift`` v ↦ S v (none: S = 0)."""
+    N = lin.phi.size
+    v, nu = x[:N], x[N:]
+    top = lagrangian_hessian_vector(step, lin, v)
+    if shift is not None:
+        top = top - shift(v)
+    for nj, cj in zip(nu, C, strict=True):
+        top = top + nj * cj
+    return np.concatenate([top, [global_dot(c, v) for c in C]])
+
+
 def kkt_solve(sys_: NewtonSystem, lin: Linearization, rhs: np.ndarray,
               inner_tol: float = 1e-8) -> tuple[np.ndarray, int]:
     """x with [[H_L, C], [Cᵀ, 0]] x = rhs (length N + len(C); or a stack of right sides,
@@ -330,12 +349,7 @@ def kkt_solve(sys_: NewtonSystem, lin: Linearization, rhs: np.ndarray,
     S_inv = np.linalg.inv(sys_.constraint_block(C)[1])
 
     def kkt(x):
-        v, nu = x[:N], x[N:]
-        top = (step.hessian_vector(lin.phi, lin.mu, lin.Kphi, v)
-               + step.constraint_hessian_vector(lin.phi, lin.Kphi, v, lin.lam[0], lin.lam[1]))
-        for nj, cj in zip(nu, C, strict=True):
-            top = top + nj * cj
-        return np.concatenate([top, [global_dot(c, v) for c in C]])
+        return kkt_apply(step, lin, C, x)
 
     coarse = sys_.coarse_space(lin)
 
