@@ -92,11 +92,10 @@ def axisymmetric_e(folder: Path, param: str, value: float) -> float | None:
     from fem_ade.analysis.sharp import reduced_energy
     from fem_ade.backends.fem.newton import solve_steady
     from fem_ade.campaigns.stability import load_state
-    from fem_ade.scenes.vesicle import get_parameter, set_parameter
+    from fem_ade.scenes.vesicle import set_parameter
 
-    points = sorted((folder / "points").iterdir())
-    states = [load_state(p)[0] for p in points]
-    be = min(states, key=lambda b: abs(get_parameter(b.stepper.params, param) - value))
+    near = min(branch_rows(folder), key=lambda r: abs(float(r[param]) - value))
+    be, _ = load_state(folder / "points" / f"{int(near['point']):04d}")  # that one only
     be.stepper.params = be.params = set_parameter(be.stepper.params, param, value)
     res = solve_steady(be)
     if not res.converged:
