@@ -36,6 +36,7 @@ This module is the driver and the command: the Dask cluster or scheduler
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import logging
 import os
@@ -84,29 +85,20 @@ NANNY_ENVIRON = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": N
 QUIET_TRACKER = "ignore:resource_tracker:UserWarning"
 
 
-def _local_cluster(workers: int, tries: int = 2):
-    """A LocalCluster of ``workers`` processes, its start tried again once: distributed
-    gives its IO loop's thread 10 s to start and then fails on an assertion (seen once in
-    the suite, on a loaded machine: ``assert loop is not None`` in LoopRunner)."""
-    from dask.distributed import LocalCluster
-
-    for attempt in range(tries):
-        try:
-            return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                dashboard_address=":0", silence_logs=logging.CRITICAL)
-        except (AssertionError, TimeoutError):
-            if attempt == tries - 1:
-                raise
-    raise AssertionError("unreachable")
-
-
 def connect(scheduler: str | None, workers: int):
     """(client, cluster or None): a LocalCluster of ``workers`` processes, or a client of the
     scheduler at ``scheduler`` (an address, or a scheduler file) within 10 s; ModelError
     (one line) for an address that does not answer, resolve or parse, or a file that is no
     scheduler's."""
     import dask
-    from dask.distributed import Client
+    from dask.distributed import Client, LocalCluster
+
+    # Garbage first: a Client left unclosed (one whose connection failed in its constructor)
+    # closes itself in __del__, and when the collector ran that inside LoopRunner.start,
+    # under distributed's lock, the start failed (``assert loop is not None`` after 10 s, in
+    # a fresh-clone CI) or hung (the next CI; py-spy: Client.__del__ → LoopRunner.stop inside
+    # LoopRunner.start). A collection here runs those finalizers before any loop starts.
+    gc.collect()
 
     if scheduler is None:
         # Workers stopped mid-point (Ctrl-C, SIGTERM) leave their semaphores to
@@ -122,7 +114,8 @@ def connect(scheduler: str | None, workers: int):
         # one; seen once in the suite). A point's failure reaches the sweep as its task's
         # exception and is written in the point's folder, not in the workers' logs.
         with dask.config.set(NANNY_ENVIRON):
-            cluster = _local_cluster(workers)
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=logging.CRITICAL)
         return Client(cluster), cluster
     if not scheduler.strip():
         raise ModelError("--scheduler needs an address (tcp://HOST:PORT) or a scheduler file")
