@@ -15,14 +15,20 @@ from fem_ade.model.params import ModelError
 
 
 @pytest.fixture(scope="module")
-def oblate(tmp_path_factory):
-    """The oblate at ε = 0.04, v = 0.85, R₀ = 0.25: one negative eigenvalue in block m = 2,
-    none in m = 4 (tests/test_modes.py)."""
+def oblate_line(tmp_path_factory):
+    """The oblate at ε = 0.04, R₀ = 0.25, v = 0.85 and 0.84: a branch folder."""
     out = tmp_path_factory.mktemp("fourier") / "oblate"
     assert branch_main(["vesicle", "--branch", "oblate", "--eps", "0.04", "--R0", "0.25",
                         "--param", "v", "--from", "0.85", "--to", "0.84", "--step", "0.01",
                         "--quiet", "--out", str(out)]) == 0
-    be, _ = load_state(out / "points" / "0000")
+    return out
+
+
+@pytest.fixture(scope="module")
+def oblate(oblate_line):
+    """The oblate at ε = 0.04, v = 0.85, R₀ = 0.25: one negative eigenvalue in block m = 2,
+    none in m = 4 (tests/test_modes.py)."""
+    be, _ = load_state(oblate_line / "points" / "0000")
     return be
 
 
@@ -130,3 +136,37 @@ def test_the_spectrum_of_an_axisymmetric_field_is_the_blocks(oblate):
     found = lowest(FourierState.of(oblate, 2, 4), k=5, sigma=-1e-3)
     assert found[0] < 0
     assert np.allclose(found, union[:5], rtol=1e-6, atol=0)
+
+
+def test_the_parameter_as_an_unknown_lands_where_the_secant_does(oblate_line):
+    """At amplitude 0.1 of the m = 2 branch in v, from the oblate at v = 0.84 (the branch
+    is born at 0.7993): Newton with v an unknown of the bordered system (its pin's
+    multiplier zero to round-off) and the secant on that multiplier (to its P_TOL in v) find
+    the same v and e, and each state is steady at the v it reports. (From v = 0.85 the
+    bordered Newton, which has no line search, strays and its GMRES stalls: the secant
+    takes over there.)"""
+    from fem_ade.campaigns.fourier_branch import P_TOL, AmplitudeBranch
+
+    be, _ = load_state(oblate_line / "points" / "0001")
+    sys2 = NewtonSystem(be)
+    _, psi = lowest_mode(sys2, linearize(sys2, be.phi), 2)
+    rows = {}
+    for method in ("bordered", "secant"):
+        br = AmplitudeBranch(be, psi, m0=2, param="v", n_theta=4, method=method)
+        rows[method] = row = br.point(0.1)
+        assert row["method"] == method and row["n_theta"] == 4
+        assert br.amplitude(br.state.phi) == pytest.approx(0.1, rel=1e-10)
+        lin = linearize(br.system, br.state.phi)
+        assert np.abs(lin.grad).max() < 1e-7 * np.abs(br.system.gradient(br.state.phi)).max()
+    b, s = rows["bordered"], rows["secant"]
+    assert abs(b["lam_pin"]) < 1e-7 < abs(s["lam_pin"])  # measured: 7.5e-12, 5.7e-6 (10 solves)
+    assert b["solves"] == 2 < s["solves"]
+    assert b["v"] == pytest.approx(s["v"], abs=10 * P_TOL)
+    assert b["e"] == pytest.approx(s["e"], abs=1e-6)  # de/dv · the secant's error in v
+
+
+def test_the_branch_refuses_an_unknown_method(oblate):
+    from fem_ade.campaigns.fourier_branch import AmplitudeBranch
+
+    with pytest.raises(ModelError, match="method is one of"):
+        AmplitudeBranch(oblate, np.zeros(oblate.space.n_dofs), m0=2, method="arclength")

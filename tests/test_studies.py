@@ -568,9 +568,10 @@ def check_starfish(result, out):
 
 def check_triaxial(result, out):
     """The oblate at ε = 0.04, v = 0.85 (unstable in m = 2), its m = 2 branch on the
-    Fourier–(r, z) geometry at two amplitudes, in v: each point steady (the pin's multiplier
-    found zero by the secant), its first cosine the amplitude's size, n_θ doubled at the
-    second (its top cosine 2.8e-3 of the first on 4 angles: measured). The bifurcation is
+    Fourier–(r, z) geometry at two amplitudes, in v: each point steady (v an unknown of the
+    bordered Newton system, the pin's multiplier zero: measured 5.7e-10 and 4.8e-8), its
+    first cosine the amplitude's size, n_θ doubled at the second (its top cosine 2.8e-3 of
+    the first on 4 angles: measured). The bifurcation is
     subcritical in v there (measured: v 0.79927, then 0.79875; e above the oblate's by
     3.9e-7, then 6.3e-6): the branch lies on the oblate's stable side and above it."""
     (line,) = result["lines"]
@@ -579,6 +580,7 @@ def check_triaxial(result, out):
     assert [x["amplitude"] for x in pts] == [0.1, 0.2] and result["param"] == "v"
     assert [x["n_theta"] for x in pts] == [4, 8]
     for x in pts:
+        assert x["method"] == "bordered" and abs(x["lam_pin"]) < 1e-6
         assert x["cosines"][0] == pytest.approx(1.0, abs=0.05)
         assert 0.5 * x["amplitude"] < x["cosines"][1] < 1.5 * x["amplitude"]
         assert x["tail"] <= 1e-3 and math.isfinite(x["e"])

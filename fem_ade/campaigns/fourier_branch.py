@@ -6,9 +6,15 @@ Its amplitude a = ⟨ψ cos mθ, φ⟩_W / ⟨ψ cos mθ, ψ cos mθ⟩_W is a g
 birth (the axisymmetric state has a = 0, the new branch a ≠ 0 on either side). For each a:
 Newton with a pinned (:class:`fem_ade.backends.fem.fourier.FourierNewtonSystem`) gives the
 state that is steady in every direction but the pin's, and ``lam`` — the pin's multiplier —
-is zero on the branch only. The parameter p (Δa₀ or v) where it is zero is found by the
-secant method, each solve warm-started; the first two amplitudes start from the (r, z) state
-plus a ψ cos mθ, later ones from the line through the last two points (φ and p).
+is zero on the branch only. The parameter p (Δa₀ or v) where it is zero is an unknown of
+the Newton system (:meth:`AmplitudeBranch.solve_free`): the bordered system's multiplier of
+the pin is replaced by p, so a Newton step is the bordered solve for two right sides — the
+residual and ∂_p of it — combined so that the pin's multiplier vanishes (one factorization
+of the modes' blocks, two GMRES solves). That Newton takes no line search (the system is
+not a minimization once p moves); where it fails the secant on the multiplier takes over,
+each of its solves a pinned Newton (:meth:`AmplitudeBranch.solve_at`). The first two
+amplitudes start from the (r, z) state plus a ψ cos mθ, later ones from the line through
+the last two points (φ and p).
 
 n_θ is doubled (the field carried over by its cosines) while the highest cosine's largest
 value exceeds :data:`TAIL` of the first's: the angles resolve the shape.
@@ -32,6 +38,12 @@ TAIL = 1e-3
 #: multiplier is steady to ~2e-5 on the window's branch, where it changes by ~20 per unit
 #: of Δa₀: p to ~1e-6)
 P_TOL, SECANT_STEPS = 1e-6, 10
+#: the bordered Newton with the parameter as an unknown: its most steps (then the secant
+#: takes over), and the relative step of the central difference ∂/∂p
+NEWTON_STEPS, PARAMETER_STEP = 12, 1e-4
+#: how a point's parameter is found: ``bordered`` (an unknown of Newton's system; the
+#: secant where that fails) or ``secant`` (on the pin's multiplier alone)
+METHODS = ("bordered", "secant")
 #: the secant's second parameter at the first amplitude: this far from the first
 FIRST_STEP = 1e-3
 
@@ -41,13 +53,18 @@ class AmplitudeBranch:
     block's eigenvector on the (r, z) nodes), in the parameter ``param``."""
 
     def __init__(self, be, psi: np.ndarray, *, m0: int, param: str = "da0",
-                 n_theta: int = 4, p_birth: float | None = None, quiet: bool = True):
+                 n_theta: int = 4, p_birth: float | None = None, quiet: bool = True,
+                 method: str = "bordered"):
         from fem_ade.backends.fem.fourier import FourierState
         from fem_ade.scenes.vesicle import get_parameter
 
+        if method not in METHODS:
+            raise ModelError(f"method is one of {', '.join(METHODS)}, got {method!r}")
         self.be, self.psi, self.m0, self.param, self.quiet = be, psi, m0, param, quiet
+        self.method = method
         # where the branch is born (the first secant's start; default: be's parameter)
         self.p0 = get_parameter(be.stepper.params, param) if p_birth is None else p_birth
+        self.birth_known = p_birth is not None
         self.state = FourierState.of(be, m0, n_theta)
         self.points: list[dict] = []
         self._fields: list[np.ndarray] = []  # the cosines of each point (n_θ, N_rz)
@@ -93,6 +110,89 @@ class AmplitudeBranch:
                   f"{time.perf_counter() - t0:.0f} s", flush=True)
         return lam, res
 
+    def solve_free(self, p: float, *, tol: float = 1e-12,
+                   max_iterations: int = NEWTON_STEPS):
+        """(p, the pin's multiplier, Newton's result): the steady state at the held amplitude
+        with the parameter
+        an unknown of Newton's system, from the current field and ``p`` (module docstring).
+        Raises :class:`fem_ade.backends.fem.newton.NewtonError` where it does not converge
+        (the caller then takes the secant)."""
+        from fem_ade.backends.fem.newton import NewtonError, NewtonResult, linearize
+        from fem_ade.backends.fem.solve import global_dot
+
+        sys_, st, t0 = self.system, self.state, time.perf_counter()
+        made = len(sys_.gmres_iterations)
+        st.set_parameter(self.param, p)
+        phi = sys_.restore(st.phi.copy())
+        if phi is None:
+            raise NewtonError("the predictor is too far from V = alpha, A = beta")
+        res = NewtonResult(False, 0, math.nan, math.nan, math.nan)
+        for it in range(max_iterations + 1):
+            lin = linearize(sys_, phi)
+            solver = sys_.factor(lin)
+            x1, y1 = solver.solve(-lin.grad, -lin.violation)
+            x2, y2 = self._column_solve(solver, lin)
+            dp = -(lin.lam[3] + y1[3]) / y2[3]  # the pin's multiplier to zero
+            dphi = x1 + dp * x2
+            decrement = abs(global_dot(lin.grad, dphi)) / max(abs(lin.E), 1e-300)
+            res.decrement.append(decrement)
+            res.E = lin.E
+            lam = float(lin.lam[3])
+            if decrement <= tol and abs(dp) <= tol ** 0.75:
+                res.converged = True
+                break
+            if it == max_iterations or not math.isfinite(dp):
+                break
+            p += dp
+            st.set_parameter(self.param, p)
+            phi = sys_.restore(phi + dphi)
+            if phi is None:
+                raise NewtonError(f"V and A not restored after step {it} at {self.param} "
+                                  f"= {p:.8g}")
+            res.iterations = it + 1
+        if not res.converged:
+            raise NewtonError(f"the bordered Newton in {self.param} did not converge in "
+                              f"{res.iterations} steps (decrements {res.decrement})")
+        st._set(phi)
+        res.krylov = sys_.gmres_iterations[made:]
+        res.seconds = time.perf_counter() - t0
+        if not self.quiet:
+            print(f"    {self.param} = {p:.10f} (an unknown): Newton {res.iterations}, "
+                  f"GMRES {sys_.gmres_iterations[made:]}, {res.seconds:.0f} s", flush=True)
+        return p, lam, res
+
+    def _column_solve(self, solver, lin) -> tuple[np.ndarray, np.ndarray]:
+        """(x, y) with the bordered system [x; y] = −∂_p(∇E + Cλ, the constraints' values).
+        A part in the constraints' rows (v moves α) is first met by d₀ = P⁻¹C(CᵀP⁻¹C)⁻¹ ∂_p c,
+        leaving GMRES a right side in the top rows: on the constraints' rows alone it
+        stagnated (measured: 2.5e-3 after 660 iterations, the v column at ε = 0.04)."""
+        from fem_ade.backends.fem.newton import lagrangian_hessian_vector
+
+        gp, vp = self._parameter_column(lin.phi, lin)
+        if not np.any(vp):
+            return solver.solve(-gp, -vp)
+        PC, G = self.system.constraint_block(lin.C)
+        d0 = np.column_stack(PC) @ np.linalg.solve(G, vp)
+        x, y = solver.solve(lagrangian_hessian_vector(self.system.step, lin, d0) - gp,
+                            np.zeros_like(vp))
+        return x - d0, y
+
+    def _parameter_column(self, phi: np.ndarray, lin) -> tuple[np.ndarray, np.ndarray]:
+        """∂/∂p of (∇E + Cλ, the constraints' values) at fixed φ and λ: a central difference,
+        exact up to rounding (∇E is linear in Δa₀, the values in α, β)."""
+        from fem_ade.scenes.vesicle import get_parameter
+
+        sys_, st = self.system, self.state
+        p = get_parameter(st.params, self.param)
+        h = PARAMETER_STEP * max(1.0, abs(p))
+        out = []
+        for q in (p + h, p - h):
+            st.set_parameter(self.param, q)
+            out.append((sys_.gradient(phi, lin.mu, lin.Kphi),
+                        sys_.constraint_values(phi, lin.Kphi)))
+        st.set_parameter(self.param, p)
+        return ((out[0][0] - out[1][0]) / (2 * h), (out[0][1] - out[1][1]) / (2 * h))
+
     def _predict(self, a: float) -> tuple[float, float]:
         """Set the field to the predictor of amplitude ``a``; the secant's two parameters."""
         pts = self.points
@@ -101,9 +201,11 @@ class AmplitudeBranch:
             self.state.phi = phi + a * self.P - self.amplitude(phi) * self.P
             if not pts:
                 return self.p0, self.p0 + FIRST_STEP
-            prev = pts[-1]  # p − p_b ∝ a² near the birth
-            guess = self.p0 + (prev[self.param] - self.p0) * (a / prev["amplitude"]) ** 2
-            return guess, guess + 0.1 * (guess - prev[self.param])
+            prev = pts[-1]  # p − p_b ∝ a² near the birth, where the birth is known
+            guess = prev[self.param] if not self.birth_known else \
+                self.p0 + (prev[self.param] - self.p0) * (a / prev["amplitude"]) ** 2
+            return guess, guess + (0.1 * (guess - prev[self.param]) if self.birth_known
+                                   else FIRST_STEP)
         (a1, p1, f1), (a2, p2, f2) = [(x["amplitude"], x[self.param], f) for x, f in
                                       zip(pts[-2:], self._fields[-2:], strict=True)]
         s = (a - a2) / (a2 - a1)
@@ -120,14 +222,18 @@ class AmplitudeBranch:
         while True:
             x0, x1 = self._predict(a)
             start = self.state.phi.copy()
-            f0, _ = self.solve_at(x0)
-            f1, res = self.solve_at(x1)
-            steps = 2
-            while abs(x1 - x0) > P_TOL and steps < SECANT_STEPS and f1 != f0:
-                x2 = x1 - f1 * (x1 - x0) / (f1 - f0)
-                f2, res = self.solve_at(x2)
-                x0, f0, x1, f1 = x1, f1, x2, f2
-                steps += 1
+            f0, _ = self.solve_at(x0)  # onto the pinned states, with the line search
+            pinned, used = self.state.phi.copy(), "secant"
+            if self.method == "bordered":
+                try:
+                    x1, f1, res = self.solve_free(x0)
+                    steps, used = 2, "bordered"
+                except ArithmeticError as err:  # NewtonError, or GMRES short of its tolerance
+                    if not self.quiet:
+                        print(f"    {err}: the secant instead", flush=True)
+                    self.state.phi = pinned
+            if used == "secant":
+                x1, f1, res, steps = self._secant(x0, x1, f0)
             modes = self.state.space.modes(self.state.phi)
             tail = float(np.abs(modes[-1]).max() / np.abs(modes[1]).max())
             if tail <= TAIL:
@@ -137,9 +243,21 @@ class AmplitudeBranch:
             if not self.quiet:
                 print(f"  amplitude {a:g}: top cosine {tail:.1e} of the first, n_theta {n}",
                       flush=True)
-        return self._record(a, x1, f1, res, modes, tail, steps, t0, c0)
+        return self._record(a, x1, f1, res, modes, tail, (used, steps), t0, c0)
 
-    def _record(self, a, x, lam, res, modes, tail, steps, t0, c0) -> dict:
+    def _secant(self, x0: float, x1: float, f0: float):
+        """The secant on the pin's multiplier from parameters x0 (its multiplier f0, the
+        state steady there) and x1: (p, multiplier, Newton's last result, solves)."""
+        f1, res = self.solve_at(x1)
+        steps = 2
+        while abs(x1 - x0) > P_TOL and steps < SECANT_STEPS and f1 != f0:
+            x2 = x1 - f1 * (x1 - x0) / (f1 - f0)
+            f2, res = self.solve_at(x2)
+            x0, f0, x1, f1 = x1, f1, x2, f2
+            steps += 1
+        return x1, f1, res, steps
+
+    def _record(self, a, x, lam, res, modes, tail, solves, t0, c0) -> dict:
         from fem_ade.analysis.sharp import reduced_energy
 
         st = self.state
@@ -149,8 +267,9 @@ class AmplitudeBranch:
                "E": d["E"], "W": d["W"], "G": d.get("G", 0.0), "V": d["V"], "A": d["A"],
                "lam_pin": lam, "n_theta": st.space.n_theta, "tail": tail,
                "cosines": [float(np.abs(x).max()) for x in modes[:6]],
-               "solves": steps, "newton_last": res.iterations,
-               "gmres_last": int(sum(self.system.gmres_iterations[-res.iterations - 1:])),
+               "method": solves[0], "solves": solves[1], "newton_last": res.iterations,
+               "gmres_last": int(sum(res.krylov) if solves[0] == "bordered" else
+                                 sum(self.system.gmres_iterations[-res.iterations - 1:])),
                "seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
         self.points.append(row)
         self._fields.append(modes)
@@ -169,7 +288,8 @@ def _pad(modes: np.ndarray, n: int) -> np.ndarray:
 
 
 def follow(be, psi, amplitudes, out: Path, *, m0: int, param: str = "da0",
-           n_theta: int = 4, p_birth: float | None = None, quiet: bool = True) -> list[dict]:
+           n_theta: int = 4, p_birth: float | None = None, quiet: bool = True,
+           method: str = "bordered") -> list[dict]:
     """The branch's points at ``amplitudes`` (increasing), each kept in ``out`` as
     ``NNNN.json`` with its cosines in ``NNNN.npz``; a point already there is read back (with
     its field, so the next predictor is the same), so a stopped run goes on."""
@@ -180,7 +300,7 @@ def follow(be, psi, amplitudes, out: Path, *, m0: int, param: str = "da0",
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     branch = AmplitudeBranch(be, psi, m0=m0, param=param, n_theta=n_theta, p_birth=p_birth,
-                             quiet=quiet)
+                             quiet=quiet, method=method)
     for k, a in enumerate(amplitudes):
         done, field = out / f"{k:04d}.json", out / f"{k:04d}.npz"
         if done.is_file() and field.is_file():
