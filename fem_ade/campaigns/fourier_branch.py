@@ -100,7 +100,7 @@ class AmplitudeBranch:
 
         self.state.set_parameter(self.param, p)
         t0, made = time.perf_counter(), len(self.system.gmres_iterations)
-        res = solve_steady(self.state, system=self.system)
+        res = solve_steady(self.state, system=self.system, quiet=self.quiet)
         if not res.converged:
             raise NewtonError(f"Newton at {self.param} = {p:.8g}: {res.message}")
         lam = float(linearize(self.system, self.state.phi).lam[3])
@@ -268,8 +268,7 @@ class AmplitudeBranch:
                "lam_pin": lam, "n_theta": st.space.n_theta, "tail": tail,
                "cosines": [float(np.abs(x).max()) for x in modes[:6]],
                "method": solves[0], "solves": solves[1], "newton_last": res.iterations,
-               "gmres_last": int(sum(res.krylov) if solves[0] == "bordered" else
-                                 sum(self.system.gmres_iterations[-res.iterations - 1:])),
+               "gmres_last": int(sum(res.krylov)),
                "seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
         self.points.append(row)
         self._fields.append(modes)

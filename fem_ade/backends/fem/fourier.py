@@ -52,8 +52,12 @@ from fem_ade.model.params import ModelError
 
 #: GMRES of the bordered Newton system: its restart length and its most iterations; a
 #: solve that stops short of its tolerance (stagnation near a bifurcation, where a mode's
-#: block is nearly singular: seen at 345 iterations) is used if its residual is below INEXACT
-RESTART, MAX_ITERATIONS, INEXACT = 60, 600, 1e-5
+#: block is nearly singular: seen at 345 iterations) is used if its residual is below
+#: INEXACT. The restart is long because the θ-mean blocks miss more of the Hessian as the
+#: shape leaves the axis, and a restart throws away what GMRES learnt: at the triaxial
+#: branch's a = 0.7 predictor (n_θ = 8, 0.34M unknowns) GMRES(60) took 508 iterations
+#: (150 s), GMRES(600) 176 (53 s); 300 vectors are 0.8 GB there
+RESTART, MAX_ITERATIONS, INEXACT = 300, 900, 1e-5
 
 
 class FourierSpace:

@@ -69,9 +69,9 @@ class NewtonError(ArithmeticError):
 @dataclass
 class NewtonResult:
     """What :func:`solve_steady` did: ``converged``, ``iterations``, ``krylov`` (MINRES
-    iterations per Newton step), ``decrement`` and ``violation`` per iteration (before its
-    step), ``E``, the multipliers ``lambda_V``, ``lambda_A``, the seconds it took, the
-    ``coarse`` spaces it made."""
+    iterations per Newton step; GMRES's on the Fourier–(r, z) geometry), ``decrement`` and
+    ``violation`` per iteration (before its step), ``E``, the multipliers ``lambda_V``,
+    ``lambda_A``, the seconds it took, the ``coarse`` spaces it made."""
 
     converged: bool
     iterations: int
@@ -335,12 +335,15 @@ def kkt_solve(sys_: NewtonSystem, lin: Linearization, rhs: np.ndarray,
     (N + len(C), k)): by the factored Hessian (``sys_.direct``: the same factorization for
     every right side), or by MINRES, preconditioned by diag(P, CᵀP⁻¹C) (module docstring),
     P⁻¹ with the coarse space's correction added where ``sys_.uses_coarse``
-    (:meth:`NewtonSystem.coarse_space`); (x, MINRES iterations: 0 for the direct solve)."""
+    (:meth:`NewtonSystem.coarse_space`); (x, Krylov iterations: MINRES's, or those a
+    factor that iterates records (the Fourier–(r, z) system's GMRES), 0 for a direct solve)."""
     rhs = np.asarray(rhs, dtype=float)
     N = lin.phi.size
     if sys_.direct:
-        x, y = sys_.factor(lin).solve(rhs[:N], rhs[N:])
-        return np.concatenate([x, y], axis=0), 0
+        solver = sys_.factor(lin)
+        done = list(getattr(solver, "iterations", ()))
+        x, y = solver.solve(rhs[:N], rhs[N:])
+        return np.concatenate([x, y], axis=0), sum(getattr(solver, "iterations", ())[len(done):])
     if rhs.ndim == 2:
         out = [kkt_solve(sys_, lin, rhs[:, j], inner_tol) for j in range(rhs.shape[1])]
         return np.column_stack([x for x, _ in out]), sum(its for _, its in out)
@@ -457,7 +460,7 @@ def solve_steady(be, *, tol: float = 1e-12, max_iterations: int = 30,
             [sys_.params.alpha, sys_.params.beta]))))
         result.E, result.lambda_V, result.lambda_A = E, float(lam[0]), float(lam[1])
         if not quiet:
-            print(f"  newton {it}: E = {E:.13g}, decrement {decrement:.2e}, MINRES {its}",
+            print(f"  newton {it}: E = {E:.13g}, decrement {decrement:.2e}, Krylov {its}",
                   flush=True)
         if decrement <= tol:
             result.converged = True
