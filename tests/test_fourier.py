@@ -170,3 +170,15 @@ def test_the_branch_refuses_an_unknown_method(oblate):
 
     with pytest.raises(ModelError, match="method is one of"):
         AmplitudeBranch(oblate, np.zeros(oblate.space.n_dofs), m0=2, method="arclength")
+
+
+def test_the_predictors_weights_are_exact_on_a_parabola():
+    """The branch's predictor (the parabola through its last three points) reproduces a
+    quadratic, and its weights sum to one."""
+    from fem_ade.campaigns.fourier_branch import _lagrange
+
+    nodes = [0.2, 0.4, 0.7]
+    w = _lagrange(nodes, 1.0)
+    assert w.sum() == pytest.approx(1.0, abs=1e-14)
+    assert float(w @ [3 - x + 2 * x * x for x in nodes]) == pytest.approx(4.0, abs=1e-13)
+    assert _lagrange([0.4, 0.7], 1.0) == pytest.approx([-1.0, 2.0])

@@ -11,10 +11,12 @@ the Newton system (:meth:`AmplitudeBranch.solve_free`): the bordered system's mu
 the pin is replaced by p, so a Newton step is the bordered solve for two right sides — the
 residual and ∂_p of it — combined so that the pin's multiplier vanishes (one factorization
 of the modes' blocks, two GMRES solves). That Newton takes no line search (the system is
-not a minimization once p moves); where it fails the secant on the multiplier takes over,
-each of its solves a pinned Newton (:meth:`AmplitudeBranch.solve_at`). The first two
-amplitudes start from the (r, z) state plus a ψ cos mθ, later ones from the line through
-the last two points (φ and p).
+not a minimization once p moves), so each point first takes the pinned Newton at the
+predicted p (:meth:`AmplitudeBranch.solve_at`, with its line search) and the bordered one
+from there; where that fails the secant on the multiplier takes over, each of its solves a
+pinned Newton. The first two
+amplitudes start from the (r, z) state plus a ψ cos mθ, the third from the line through
+the last two points (φ and p), later ones from the parabola through the last three.
 
 n_θ is doubled (the field carried over by its cosines) while the highest cosine's largest
 value exceeds :data:`TAIL` of the first's: the angles resolve the shape.
@@ -206,15 +208,16 @@ class AmplitudeBranch:
                 self.p0 + (prev[self.param] - self.p0) * (a / prev["amplitude"]) ** 2
             return guess, guess + (0.1 * (guess - prev[self.param]) if self.birth_known
                                    else FIRST_STEP)
-        (a1, p1, f1), (a2, p2, f2) = [(x["amplitude"], x[self.param], f) for x, f in
-                                      zip(pts[-2:], self._fields[-2:], strict=True)]
-        s = (a - a2) / (a2 - a1)
+        k = min(len(pts), 3)  # the line through the last two points, the parabola through three
+        known = [x["amplitude"] for x in pts[-k:]]
+        c = _lagrange(known, a)
         n = self.state.space.n_theta
-        modes = _pad(f2, n) + s * (_pad(f2, n) - _pad(f1, n))
+        modes = sum(ci * _pad(f, n) for ci, f in zip(c, self._fields[-k:], strict=True))
         self.state.phi = self.state.space.from_modes({j: modes[j] for j in range(n)})
         self.state.phi += (a - self.amplitude(self.state.phi)) * self.P
-        guess = p2 + s * (p2 - p1)
-        return guess, guess + 0.05 * (p2 - p1)
+        p = [x[self.param] for x in pts[-k:]]
+        guess = float(np.dot(c, p))
+        return guess, guess + 0.05 * (p[-1] - p[-2])
 
     def point(self, a: float) -> dict:
         """The branch's point at amplitude ``a`` (n_θ doubled as :data:`TAIL` says)."""
@@ -276,6 +279,16 @@ class AmplitudeBranch:
             print(f"  amplitude {a:g}: {self.param} = {x:.8f}, e = {row['e']:.8f}, "
                   f"n_theta {row['n_theta']}, {row['seconds']:.0f} s", flush=True)
         return row
+
+
+def _lagrange(nodes: list[float], x: float) -> np.ndarray:
+    """The weights of the polynomial through ``nodes`` evaluated at ``x`` (Lagrange)."""
+    w = np.ones(len(nodes))
+    for i, xi in enumerate(nodes):
+        for j, xj in enumerate(nodes):
+            if i != j:
+                w[i] *= (x - xj) / (xi - xj)
+    return w
 
 
 def _pad(modes: np.ndarray, n: int) -> np.ndarray:
