@@ -216,7 +216,7 @@ def figure(result: dict, root: Path, out: Path) -> Path:
 
     pts, param = result["points"], result["param"]
     line = result["lines"][0]
-    fig, ax = plt.subplots(1, 4, figsize=(17, 4.2))
+    fig, ax = plt.subplots(1, 5, figsize=(21, 4.2))
     a = [x["amplitude"] for x in pts]
     ax[0].plot(a, [x[param] for x in pts], "s-", color="C3", label="from the oblate")
     other = result.get("prolate_points") or []
@@ -240,6 +240,7 @@ def figure(result: dict, root: Path, out: Path) -> Path:
     ax[1].set_yscale("symlog", linthresh=1e-10)
     ax[1].set(xlabel="amplitude a", ylabel="e less the parent's at the same Δa₀")
     ax[1].legend(fontsize=8, loc="center right")
+    _against_oblate(ax[4], pts, other, param, result["lines"])
     shown = sorted({0, len(pts) // 2, len(pts) - 1})
     sizes = []
     for k, color in zip(shown, ("C0", "C1", "C3"), strict=False):
@@ -263,6 +264,27 @@ def figure(result: dict, root: Path, out: Path) -> Path:
     fig.savefig(path, dpi=80)
     plt.close(fig)
     return path
+
+
+def _against_oblate(ax, pts, other, param, lines) -> None:
+    """e less the (r, z) oblate's at the same parameter, against it: both branches and the
+    prolate (where the two branches meet, if they are one, their curves join)."""
+    for rows, label, style in ((pts, "from the oblate", "s-C3"), (other, "from the prolate",
+                                                                 "^-C1")):
+        xs = sorted((x[param], x["e"] - x["e_oblate"]) for x in rows
+                    if x.get("e_oblate") is not None)
+        if xs:
+            ax.plot(*zip(*xs, strict=True), style[:-2], color=style[-2:], ms=4, label=label)
+    xs = sorted({(x[param], x["e_prolate"] - x["e_oblate"]) for x in pts + other
+                 if x.get("e_oblate") is not None and x.get("e_prolate") is not None})
+    if xs:
+        ax.plot(*zip(*xs, strict=True), "o:", color="C2", ms=3, label="the prolate")
+    for ln, color in zip(lines, ("C0", "C2"), strict=False):
+        for b in ln.get("bifurcations", []):
+            ax.axvline(b[param], color=color, ls="--", lw=1)
+    ax.axhline(0.0, color="C0", lw=1, label="the oblate")
+    ax.set(xlabel=param, ylabel="e − e_oblate (the (r, z) oblate at the same Δa₀)")
+    ax.legend(fontsize=8)
 
 
 def _fmt(x, spec: str) -> str:
@@ -303,7 +325,7 @@ def _stability(pts: list[dict]) -> list[str]:
 
 def _branch_table(pts: list[dict], param: str) -> list[str]:
     rows = [f"| a | {param} | e | e − e_oblate | e − e_prolate | n_θ | cosines j = 1, 2, 3 "
-            "| solves | s |", "|---|---|---|---|---|---|---|---|---|"]
+            f"| {param} by | solves | s |", "|---|---|---|---|---|---|---|---|---|---|"]
     for x in pts:
         eo, ep = x.get("e_oblate"), x.get("e_prolate")
         c = x["cosines"] + [0.0] * 4
@@ -311,7 +333,8 @@ def _branch_table(pts: list[dict], param: str) -> list[str]:
             f"| {x['amplitude']:g} | {x[param]:.7f} | {x['e']:.7f} | "
             f"{_fmt(None if eo is None else x['e'] - eo, '.2e')} | "
             f"{_fmt(None if ep is None else x['e'] - ep, '.2e')} | {x['n_theta']} | "
-            f"{c[1]:.3g}, {c[2]:.3g}, {c[3]:.3g} | {x['solves']} | {x['seconds']:.0f} |")
+            f"{c[1]:.3g}, {c[2]:.3g}, {c[3]:.3g} | {x.get('method', 'secant')} | "
+            f"{x['solves']} | {x['seconds']:.0f} |")
     return rows
 
 

@@ -182,3 +182,21 @@ def test_the_predictors_weights_are_exact_on_a_parabola():
     assert w.sum() == pytest.approx(1.0, abs=1e-14)
     assert float(w @ [3 - x + 2 * x * x for x in nodes]) == pytest.approx(4.0, abs=1e-13)
     assert _lagrange([0.4, 0.7], 1.0) == pytest.approx([-1.0, 2.0])
+
+
+def test_the_predictor_moves_an_interface_instead_of_blending_two():
+    """_extrapolate gives back each field at its own weight (to round-off; |φ| > 1 in the
+    bulk included),
+    and the line through two tanh profiles at x₀ = 0, 0.1 puts the third at 0.2 to
+    round-off, where the blend in φ is off by O(1) of its shift over ε."""
+    from fem_ade.campaigns.fourier_branch import _extrapolate, _lagrange
+
+    x = np.linspace(-1, 1, 401)
+    eps = 0.05
+    prof = [np.tanh((x - s) / eps) for s in (0.0, 0.1, 0.2)]
+    prof[0][:3] = -1.0 - 1e-4  # an overshoot in the bulk
+    for i in range(2):
+        assert np.allclose(_extrapolate(prof[:2], np.eye(2)[i]), prof[i], rtol=0, atol=1e-12)
+    w = _lagrange([0.0, 0.1], 0.2)
+    assert np.abs(_extrapolate(prof[:2], w) - prof[2])[3:].max() < 1e-6
+    assert np.abs(w[0] * prof[0] + w[1] * prof[1] - prof[2]).max() > 0.5

@@ -16,7 +16,8 @@ predicted p (:meth:`AmplitudeBranch.solve_at`, with its line search) and the bor
 from there; where that fails the secant on the multiplier takes over, each of its solves a
 pinned Newton. The first two
 amplitudes start from the (r, z) state plus a ψ cos mθ, the third from the line through
-the last two points (φ and p), later ones from the parabola through the last three.
+the last two points (φ and p), later ones from the parabola through the last three, φ's
+taken in artanh φ (:func:`_extrapolate`).
 
 n_θ is doubled (the field carried over by its cosines) while the highest cosine's largest
 value exceeds :data:`TAIL` of the first's: the angles resolve the shape.
@@ -46,6 +47,8 @@ NEWTON_STEPS, PARAMETER_STEP = 12, 1e-4
 #: how a point's parameter is found: ``bordered`` (an unknown of Newton's system; the
 #: secant where that fails) or ``secant`` (on the pin's multiplier alone)
 METHODS = ("bordered", "secant")
+#: the predictor's ψ = artanh φ is taken of φ clipped to |φ| ≤ CLIP
+CLIP = 1.0 - 1e-9
 #: the secant's second parameter at the first amplitude: this far from the first
 FIRST_STEP = 1e-3
 
@@ -209,11 +212,11 @@ class AmplitudeBranch:
             return guess, guess + (0.1 * (guess - prev[self.param]) if self.birth_known
                                    else FIRST_STEP)
         k = min(len(pts), 3)  # the line through the last two points, the parabola through three
-        known = [x["amplitude"] for x in pts[-k:]]
-        c = _lagrange(known, a)
-        n = self.state.space.n_theta
-        modes = sum(ci * _pad(f, n) for ci, f in zip(c, self._fields[-k:], strict=True))
-        self.state.phi = self.state.space.from_modes({j: modes[j] for j in range(n)})
+        c = _lagrange([x["amplitude"] for x in pts[-k:]], a)
+        space, n = self.state.space, self.state.space.n_theta
+        fields = [space.from_modes({j: _pad(f, n)[j] for j in range(n)})
+                  for f in self._fields[-k:]]
+        self.state.phi = _extrapolate(fields, c)
         self.state.phi += (a - self.amplitude(self.state.phi)) * self.P
         p = [x[self.param] for x in pts[-k:]]
         guess = float(np.dot(c, p))
@@ -279,6 +282,19 @@ class AmplitudeBranch:
             print(f"  amplitude {a:g}: {self.param} = {x:.8f}, e = {row['e']:.8f}, "
                   f"n_theta {row['n_theta']}, {row['seconds']:.0f} s", flush=True)
         return row
+
+
+def _extrapolate(fields: list[np.ndarray], weights: np.ndarray) -> np.ndarray:
+    """Σ wᵢ φᵢ taken in ψ = artanh φ, where an interface that moves is a shift, not a blend
+    of two profiles: tanh(Σ wᵢ ψᵢ) + Σ wᵢ (φᵢ − φᵢ clipped to |φ| < 1) (the last term keeps
+    the fields exactly at their own points). Measured on the triaxial branch (ε = 0.01,
+    n_θ = 8), a = 1.0 from 0.4, 0.7 (the line) and 0.2, 0.4, 0.7 (the parabola), after V and
+    A are restored: E 40.968 and 40.9026 against the point's 40.9009; blended in φ, 52.70
+    and 47.26 (Newton then took 10 iterations)."""
+    inside = [np.clip(f, -CLIP, CLIP) for f in fields]
+    psi = sum(w * np.arctanh(f) for w, f in zip(weights, inside, strict=True))
+    rest = sum(w * (f - g) for w, f, g in zip(weights, fields, inside, strict=True))
+    return np.tanh(psi) + rest
 
 
 def _lagrange(nodes: list[float], x: float) -> np.ndarray:
