@@ -186,9 +186,8 @@ def test_the_predictors_weights_are_exact_on_a_parabola():
 
 def test_the_predictor_moves_an_interface_instead_of_blending_two():
     """_extrapolate gives back each field at its own weight (to round-off; |φ| > 1 in the
-    bulk included),
-    and the line through two tanh profiles at x₀ = 0, 0.1 puts the third at 0.2 to
-    round-off, where the blend in φ is off by O(1) of its shift over ε."""
+    bulk included), and the line through two tanh profiles at x₀ = 0, 0.1 puts the third at
+    0.2 to round-off, where the blend in φ is off by O(1) of its shift over ε."""
     from fem_ade.campaigns.fourier_branch import _extrapolate, _lagrange
 
     x = np.linspace(-1, 1, 401)
