@@ -198,8 +198,9 @@ class AmplitudeBranch:
         st.set_parameter(self.param, p)
         return ((out[0][0] - out[1][0]) / (2 * h), (out[0][1] - out[1][1]) / (2 * h))
 
-    def _predict(self, a: float) -> tuple[float, float]:
-        """Set the field to the predictor of amplitude ``a``; the secant's two parameters."""
+    def _predict(self, a: float, plain: bool = False) -> tuple[float, float]:
+        """Set the field to the predictor of amplitude ``a``; the secant's two parameters.
+        ``plain``: the line through the last two points, φ blended (the fallback)."""
         pts = self.points
         if len(pts) < 2:
             phi = self.state.space.from_modes({0: self.be.phi})
@@ -211,12 +212,12 @@ class AmplitudeBranch:
                 self.p0 + (prev[self.param] - self.p0) * (a / prev["amplitude"]) ** 2
             return guess, guess + (0.1 * (guess - prev[self.param]) if self.birth_known
                                    else FIRST_STEP)
-        k = min(len(pts), 3)  # the line through the last two points, the parabola through three
+        k = 2 if plain else min(len(pts), 3)  # the line through two points, the parabola
         c = _lagrange([x["amplitude"] for x in pts[-k:]], a)
         space, n = self.state.space, self.state.space.n_theta
         fields = [space.from_modes({j: _pad(f, n)[j] for j in range(n)})
                   for f in self._fields[-k:]]
-        self.state.phi = _extrapolate(fields, c)
+        self.state.phi = c @ np.array(fields) if plain else _extrapolate(fields, c)
         self.state.phi += (a - self.amplitude(self.state.phi)) * self.P
         p = [x[self.param] for x in pts[-k:]]
         guess = float(np.dot(c, p))
@@ -228,7 +229,16 @@ class AmplitudeBranch:
         while True:
             x0, x1 = self._predict(a)
             start = self.state.phi.copy()
-            f0, _ = self.solve_at(x0)  # onto the pinned states, with the line search
+            try:
+                f0, _ = self.solve_at(x0)  # onto the pinned states, with the line search
+            except ArithmeticError as err:  # seen once: GMRES stalled at the prolate's a = 0.4
+                if len(self.points) < 2:
+                    raise
+                if not self.quiet:
+                    print(f"    {err}: from the line through the last two points", flush=True)
+                x0, x1 = self._predict(a, plain=True)
+                start = self.state.phi.copy()
+                f0, _ = self.solve_at(x0)
             pinned, used = self.state.phi.copy(), "secant"
             if self.method == "bordered":
                 try:
