@@ -265,8 +265,8 @@ class AmplitudeBranch:
         """The secant on the pin's multiplier from parameters x0 (its multiplier f0, the
         state steady there) and x1: (p, multiplier, Newton's last result, solves)."""
         f1, res = self.solve_at(x1)
-        steps = 2
-        while abs(x1 - x0) > P_TOL and steps < SECANT_STEPS and f1 != f0:
+        steps = 2  # at least one secant step: the two starts may lie within P_TOL
+        while (steps == 2 or abs(x1 - x0) > P_TOL) and steps < SECANT_STEPS and f1 != f0:
             x2 = x1 - f1 * (x1 - x0) / (f1 - f0)
             f2, res = self.solve_at(x2)
             x0, f0, x1, f1 = x1, f1, x2, f2
