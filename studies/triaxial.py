@@ -42,12 +42,12 @@ OUT = Path("runs") / "studies"
 V, KBAR, R0, EPS, N = 0.7, 1.4, 0.195, 0.01, 400
 #: the lines: (branch, Δa₀ from, to, step)
 LINES = (("oblate", 1.08, 1.10, 0.01), ("prolate", 1.08, 1.10, 0.01))
-#: the branch's amplitudes (max |ψ| = 1; φ's range is 2): the next, 0.7, was stopped after
-#: 39 min of one core (the notes' cost)
-AMPLITUDES = (0.05, 0.1, 0.2, 0.4)
+#: the branch's amplitudes (max |ψ| = 1; φ's range is 2): the next, 1.3, converged on
+#: n_θ = 8 but its top cosine (3.2e-3 of the first) asked for n_θ = 16, stopped (the notes)
+AMPLITUDES = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0)
 #: the branch born at the prolate's m = 2 bifurcation (the window's other end), in the
 #: prolate's own frame: its first amplitudes
-PROLATE_AMPLITUDES = (0.05, 0.1, 0.2)
+PROLATE_AMPLITUDES = (0.05, 0.1, 0.2, 0.4)
 #: the points whose stability in the sector (the fields with the mirror planes x = 0, y = 0:
 #: cos 2jθ) is computed (their amplitudes), and the eigenvalues nearest SIGMA found
 STABILITY, SIGMA, K_LOWEST = (0.05,), -2e-6, 3
@@ -261,7 +261,7 @@ def figure(result: dict, root: Path, out: Path) -> Path:
               xlabel="r", ylabel="z − z_c")
     fig.tight_layout()
     path = out / "triaxial.png"
-    fig.savefig(path, dpi=80)
+    fig.savefig(path, dpi=64)
     plt.close(fig)
     return path
 

@@ -819,13 +819,15 @@ def test_report_comparison_keeps_meaning_and_catches_stale_reports():
     assert differences("a.png", png(200), png(200, (0, 0, 0)))
 
 
-def test_committed_results_stay_under_6_45_mb():
-    """A clone carries the results a reader needs, not bulk run data (≤ 6.45 MB in all: 5.18 MB
+def test_committed_results_stay_under_6_5_mb():
+    """A clone carries the results a reader needs, not bulk run data (≤ 6.5 MB in all: 5.18 MB
     with the azimuthal study's nine branch tables and the ADE plane's 64 cells, 2026-12-04;
     6.06 MB with the ADE lines' modes at two ε, 2026-12-07; 6.25 MB with the D2 branch on
     the octant, 2026-12-07 (the cap was 6.2 MB); 6.30 MB with the starfish on the octant,
     2026-12-07 (the cap was 6.3 MB); 6.44 MB with the triaxial branch on the Fourier-(r, z)
-    geometry, 2026-12-07 (the cap was 6.35 MB); one run folder's final.npz is 1-20 MB)."""
+    geometry, 2026-12-07 (the cap was 6.35 MB); 6.45 MB with that branch followed to a = 1.0
+    and its figure's fifth panel, 2026-12-07 (the cap was 6.45 MB); one run folder's
+    final.npz is 1-20 MB)."""
     import subprocess
 
     root = STUDIES.parent
@@ -836,7 +838,7 @@ def test_committed_results_stay_under_6_45_mb():
     sizes = {f: (root / f).stat().st_size for f in listed.stdout.split() if (root / f).is_file()}
     total = sum(sizes.values())
     largest = sorted(sizes, key=sizes.get)[-3:]
-    assert total <= 6_450_000, f"{total / 1e6:.2f} MB committed; the largest: {largest}"
+    assert total <= 6_500_000, f"{total / 1e6:.2f} MB committed; the largest: {largest}"
 
 
 def test_ade_plane_runs_each_seed_as_a_point_of_one_sweep(tmp_path, monkeypatch):
