@@ -23,8 +23,8 @@ window, and lies below both there: the window's lowest shape is a triaxial ellip
 **Control**: the branch's Δa₀ as a → 0 is the oblate's bifurcation as the (r, z) blocks
 locate it, and its e there is the oblate's.
 
-    python studies/triaxial.py --out studies/results   # ~2.5 h on one core (the notes)
-    python studies/triaxial.py --quick                 # the ε = 0.04 oblate, ~45 s
+    python studies/triaxial.py --out studies/results   # ~3.5 h on one core (the notes)
+    python studies/triaxial.py --quick                 # the ε = 0.04 oblate, ~25 s
 """
 
 from __future__ import annotations
@@ -207,7 +207,7 @@ def _sections(root: Path, line: dict, k: int):
 def figure(result: dict, root: Path, out: Path) -> Path:
     """triaxial.png: Δa₀ against the amplitude; e less that of the branch each was born from,
     against the amplitude; the z = z_c section and the meridians θ = 0, π/2 of three points
-    of the oblate's branch."""
+    of the oblate's branch; e less the oblate's against Δa₀ (:func:`_against_oblate`)."""
     import matplotlib
     import numpy as np
 
@@ -269,12 +269,12 @@ def figure(result: dict, root: Path, out: Path) -> Path:
 def _against_oblate(ax, pts, other, param, lines) -> None:
     """e less the (r, z) oblate's at the same parameter, against it: both branches and the
     prolate (where the two branches meet, if they are one, their curves join)."""
-    for rows, label, style in ((pts, "from the oblate", "s-C3"), (other, "from the prolate",
-                                                                 "^-C1")):
+    for rows, label, marker, color in ((pts, "from the oblate", "s-", "C3"),
+                                       (other, "from the prolate", "^-", "C1")):
         xs = sorted((x[param], x["e"] - x["e_oblate"]) for x in rows
                     if x.get("e_oblate") is not None)
         if xs:
-            ax.plot(*zip(*xs, strict=True), style[:-2], color=style[-2:], ms=4, label=label)
+            ax.plot(*zip(*xs, strict=True), marker, color=color, ms=4, label=label)
     xs = sorted({(x[param], x["e_prolate"] - x["e_oblate"]) for x in pts + other
                  if x.get("e_oblate") is not None and x.get("e_prolate") is not None})
     if xs:

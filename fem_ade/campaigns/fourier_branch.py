@@ -14,10 +14,9 @@ of the modes' blocks, two GMRES solves). That Newton takes no line search (the s
 not a minimization once p moves), so each point first takes the pinned Newton at the
 predicted p (:meth:`AmplitudeBranch.solve_at`, with its line search) and the bordered one
 from there; where that fails the secant on the multiplier takes over, each of its solves a
-pinned Newton. The first two
-amplitudes start from the (r, z) state plus a ψ cos mθ, the third from the line through
-the last two points (φ and p), later ones from the parabola through the last three, φ's
-taken in artanh φ (:func:`_extrapolate`).
+pinned Newton. The first two amplitudes start from the (r, z) state plus a ψ cos mθ, the
+third from the line through the last two points (φ and p), later ones from the parabola
+through the last three, φ's taken in artanh φ (:func:`_extrapolate`).
 
 n_θ is doubled (the field carried over by its cosines) while the highest cosine's largest
 value exceeds :data:`TAIL` of the first's: the angles resolve the shape.
@@ -118,8 +117,8 @@ class AmplitudeBranch:
     def solve_free(self, p: float, *, tol: float = 1e-12,
                    max_iterations: int = NEWTON_STEPS):
         """(p, the pin's multiplier, Newton's result): the steady state at the held amplitude
-        with the parameter
-        an unknown of Newton's system, from the current field and ``p`` (module docstring).
+        with the parameter an unknown of Newton's system, from the current field and ``p``
+        (module docstring).
         Raises :class:`fem_ade.backends.fem.newton.NewtonError` where it does not converge
         (the caller then takes the secant)."""
         from fem_ade.backends.fem.newton import NewtonError, NewtonResult, linearize
@@ -163,7 +162,7 @@ class AmplitudeBranch:
         res.seconds = time.perf_counter() - t0
         if not self.quiet:
             print(f"    {self.param} = {p:.10f} (an unknown): Newton {res.iterations}, "
-                  f"GMRES {sys_.gmres_iterations[made:]}, {res.seconds:.0f} s", flush=True)
+                  f"GMRES {res.krylov}, {res.seconds:.0f} s", flush=True)
         return p, lam, res
 
     def _column_solve(self, solver, lin) -> tuple[np.ndarray, np.ndarray]:
@@ -173,7 +172,7 @@ class AmplitudeBranch:
         stagnated (measured: 2.5e-3 after 660 iterations, the v column at ε = 0.04)."""
         from fem_ade.backends.fem.newton import lagrangian_hessian_vector
 
-        gp, vp = self._parameter_column(lin.phi, lin)
+        gp, vp = self._parameter_column(lin)
         if not np.any(vp):
             return solver.solve(-gp, -vp)
         PC, G = self.system.constraint_block(lin.C)
@@ -182,7 +181,7 @@ class AmplitudeBranch:
                             np.zeros_like(vp))
         return x - d0, y
 
-    def _parameter_column(self, phi: np.ndarray, lin) -> tuple[np.ndarray, np.ndarray]:
+    def _parameter_column(self, lin) -> tuple[np.ndarray, np.ndarray]:
         """∂/∂p of (∇E + Cλ, the constraints' values) at fixed φ and λ: a central difference,
         exact up to rounding (∇E is linear in Δa₀, the values in α, β)."""
         from fem_ade.scenes.vesicle import get_parameter
@@ -193,8 +192,8 @@ class AmplitudeBranch:
         out = []
         for q in (p + h, p - h):
             st.set_parameter(self.param, q)
-            out.append((sys_.gradient(phi, lin.mu, lin.Kphi),
-                        sys_.constraint_values(phi, lin.Kphi)))
+            out.append((sys_.gradient(lin.phi, lin.mu, lin.Kphi),
+                        sys_.constraint_values(lin.phi, lin.Kphi)))
         st.set_parameter(self.param, p)
         return ((out[0][0] - out[1][0]) / (2 * h), (out[0][1] - out[1][1]) / (2 * h))
 
@@ -215,8 +214,7 @@ class AmplitudeBranch:
         k = 2 if plain else min(len(pts), 3)  # the line through two points, the parabola
         c = _lagrange([x["amplitude"] for x in pts[-k:]], a)
         space, n = self.state.space, self.state.space.n_theta
-        fields = [space.from_modes({j: _pad(f, n)[j] for j in range(n)})
-                  for f in self._fields[-k:]]
+        fields = [space.from_modes(dict(enumerate(_pad(f, n)))) for f in self._fields[-k:]]
         self.state.phi = c @ np.array(fields) if plain else _extrapolate(fields, c)
         self.state.phi += (a - self.amplitude(self.state.phi)) * self.P
         p = [x[self.param] for x in pts[-k:]]

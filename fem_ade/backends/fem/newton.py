@@ -341,9 +341,9 @@ def kkt_solve(sys_: NewtonSystem, lin: Linearization, rhs: np.ndarray,
     N = lin.phi.size
     if sys_.direct:
         solver = sys_.factor(lin)
-        done = list(getattr(solver, "iterations", ()))
+        before = len(getattr(solver, "iterations", ()))
         x, y = solver.solve(rhs[:N], rhs[N:])
-        return np.concatenate([x, y], axis=0), sum(getattr(solver, "iterations", ())[len(done):])
+        return np.concatenate([x, y], axis=0), sum(getattr(solver, "iterations", ())[before:])
     if rhs.ndim == 2:
         out = [kkt_solve(sys_, lin, rhs[:, j], inner_tol) for j in range(rhs.shape[1])]
         return np.column_stack([x for x, _ in out]), sum(its for _, its in out)
