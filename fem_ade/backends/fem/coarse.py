@@ -1,5 +1,6 @@
 """A coarse space of the membrane's shape modes for MINRES on the Newton system of a tensor
-space without a direct solve (3D; docs/model.md §12).
+space without a direct solve (3D; docs/model.md §12); its functions on the Fourier–(r, z)
+geometry (:func:`fourier_shape_functions`, for its GMRES: docs/model.md §13).
 
 Why: Newton's preconditioner P, the bulk Hessian (:mod:`fem_ade.backends.fem.newton`), sees
 a displacement of the interface as a bulk mode of eigenvalue ~4κ/ε³, where the Hessian gives
@@ -77,6 +78,14 @@ FLOOR = 1e-10
 #: a solve taking this many times the iterations of the first solve with a coarse space
 #: marks the space stale (the state has moved too far from where it was made)
 REBUILD = 2.0
+#: the polynomials' total degree of the Fourier–(r, z) geometry's coarse functions
+#: (:func:`fourier_shape_functions`, used by :class:`fem_ade.backends.fem.fourier.KKTSolver`).
+#: Measured on the triaxial branch's a = 1.0 point (studies/triaxial.py; n_θ = 8, 0.34M
+#: unknowns, one thread; GMRES to 1e-8 with the θ-mean blocks alone: 256 iterations, 82 s):
+#: d = 2, 3, 4, 6: 40, 33, 26, 28 iterations in 15, 14, 13, 18 s after 8.5, 14, 23, 45 s of
+#: set-up; d = 4 with the θ-displacements p ∂_θφ/r sin(j m₀ θ) added: 24; without the
+#: projection x − s n: 39. At a = 0.4: 123 → 21 iterations; at a = 0.05 (n_θ = 4): 23 → 8
+FOURIER_DEGREE = 4
 #: rows of the stack per product (bounds the temporaries: CHUNK × N doubles)
 CHUNK = 32
 
@@ -85,35 +94,64 @@ def shape_functions(space, phi: np.ndarray, eps: float, degree: int = DEGREE) ->
     """The coarse functions (k × N) of the interface of ``phi`` on a tensor ``space`` (module
     docstring): p(x − s n) ∂ₐφ for the Legendre polynomials p of total degree ≤ ``degree`` in
     the interface's bounding box and each axis a."""
-    from numpy.polynomial import legendre
-
     from fem_ade.backends.fem.modes import gradient
 
     grads = gradient(space, phi)
-    norm = np.sqrt(sum(g * g for g in grads))
-    s = math.sqrt(2.0) * eps * np.arctanh(np.clip(phi, -1.0 + 1e-6, 1.0 - 1e-6))
-    moved = s / np.maximum(norm, 1e-300)
-    X = space.doflocs - moved * np.array(grads)
-    band = np.abs(phi) < 0.9
-    if not np.any(band):
-        raise ValueError("the field has no interface (|phi| >= 0.9 everywhere)")
-    lo, hi = X[:, band].min(axis=1), X[:, band].max(axis=1)
-    half = np.maximum((hi - lo) / 2.0, 1e-12)
-    U = np.clip((X - ((lo + hi) / 2.0)[:, None]) / half[:, None], -1.0, 1.0)
-    eye = np.eye(degree + 1)
-    P1 = [[legendre.legval(U[a], eye[q]) for q in range(degree + 1)] for a in range(space.dim)]
-    powers = [q for q in itertools.product(range(degree + 1), repeat=space.dim)
-              if sum(q) <= degree]
-    Z = np.empty((len(powers) * space.dim, phi.size))
+    Z = np.empty((math.comb(degree + space.dim, space.dim) * space.dim, phi.size))
     row = 0
-    for q in powers:
-        p = P1[0][q[0]].copy()
-        for a in range(1, space.dim):
-            p *= P1[a][q[a]]
+    for p in _polynomials(space.doflocs, phi, np.array(grads), eps, degree):
         for g in grads:
             np.multiply(p, g, out=Z[row])
             row += 1
     return Z
+
+
+def fourier_shape_functions(space, phi: np.ndarray, eps: float,
+                            degree: int = FOURIER_DEGREE) -> np.ndarray:
+    """The coarse functions (k × N) of the interface of ``phi`` on a Fourier–(r, z) ``space``
+    (:class:`fem_ade.backends.fem.fourier.FourierSpace`): p(x − s n) ∂ₐφ cos(j m₀ θ) for the
+    Legendre polynomials p of total degree ≤ ``degree`` in the (r, z) bounding box of the
+    interface's every angle, a ∈ {r, z} and j < n_θ — a displacement of the interface in
+    (r, z) that varies along θ as a cosine; x − s n and ∂ₐφ are each angle's (its (r, z)
+    slice's)."""
+    from fem_ade.backends.fem.modes import gradient
+
+    S = space.slices(phi)
+    grads = np.array([gradient(space.rz, s) for s in S]).transpose(1, 0, 2)  # (2, n_θ, N_rz)
+    X = np.broadcast_to(space.rz.doflocs[:, None, :], grads.shape)
+    cosines = np.cos(np.outer(space.m, space.theta))[:, :, None]  # (j, angle, 1)
+    return np.array([space.from_slices(p * g * c)
+                     for p in _polynomials(X, S, grads, eps, degree)
+                     for c in cosines for g in grads])
+
+
+def _polynomials(X: np.ndarray, phi: np.ndarray, grads: np.ndarray, eps: float,
+                 degree: int):
+    """The Legendre polynomials of total degree ≤ ``degree`` in the bounding box of the
+    interface (|φ| < 0.9), each at the nodes' projections x − s n onto it (``X`` the nodes'
+    coordinates and ``grads`` ∇φ, axis first), in the order of :func:`shape_functions`."""
+    from numpy.polynomial import legendre
+
+    dim = len(X)
+    norm = np.sqrt(sum(g * g for g in grads))
+    s = math.sqrt(2.0) * eps * np.arctanh(np.clip(phi, -1.0 + 1e-6, 1.0 - 1e-6))
+    X = X - s / np.maximum(norm, 1e-300) * grads
+    band = np.abs(phi) < 0.9
+    if not np.any(band):
+        raise ValueError("the field has no interface (|phi| >= 0.9 everywhere)")
+    lo = np.array([x[band].min() for x in X])
+    hi = np.array([x[band].max() for x in X])
+    half = np.maximum((hi - lo) / 2.0, 1e-12)
+    shape = (dim,) + (1,) * (X.ndim - 1)
+    U = np.clip((X - ((lo + hi) / 2.0).reshape(shape)) / half.reshape(shape), -1.0, 1.0)
+    eye = np.eye(degree + 1)
+    P1 = [[legendre.legval(U[a], eye[q]) for q in range(degree + 1)] for a in range(dim)]
+    for q in itertools.product(range(degree + 1), repeat=dim):
+        if sum(q) <= degree:
+            p = P1[0][q[0]].copy()
+            for a in range(1, dim):
+                p *= P1[a][q[a]]
+            yield p
 
 
 def hessian(space, ke: float, co: dict, z: np.ndarray) -> np.ndarray:

@@ -33,8 +33,12 @@ Newton's method (:class:`FourierNewtonSystem`) solves the bordered system by GMR
 preconditioned by the modes' blocks at the θ-mean of the Hessian's coefficients — exact for
 an axisymmetric state, whose Hessian is block-diagonal — each factored by the sparse LU of
 the axisymmetric geometry (:mod:`fem_ade.backends.fem.direct`), the constraints and the
-rank-one terms as borders of the whole. No rigid motion keeps both mirror planes but the
-translation along z, which is pinned as on the axisymmetric geometry.
+rank-one terms as borders of the whole — after a coarse step on the membrane's shape modes
+(:class:`Galerkin`): the θ-mean blocks smear an interface that moves with θ and miss the
+displacements of it that cost only bending, which GMRES would find one by one (256
+iterations at the triaxial branch's a = 1.0, 26 with the coarse step:
+:func:`fem_ade.backends.fem.coarse.fourier_shape_functions`). No rigid motion keeps both
+mirror planes but the translation along z, which is pinned as on the axisymmetric geometry.
 """
 
 from __future__ import annotations
@@ -53,10 +57,11 @@ from fem_ade.model.params import ModelError
 #: GMRES of the bordered Newton system: its restart length and its most iterations; a
 #: solve that stops short of its tolerance (stagnation near a bifurcation, where a mode's
 #: block is nearly singular: seen at 345 iterations) is used if its residual is below
-#: INEXACT. The restart is long because the θ-mean blocks miss more of the Hessian as the
-#: shape leaves the axis, and a restart throws away what GMRES learnt: at the triaxial
-#: branch's a = 0.7 predictor (n_θ = 8, 0.34M unknowns) GMRES(60) took 508 iterations
-#: (150 s), GMRES(600) 176 (53 s); 300 vectors are 0.8 GB there
+#: INEXACT. The restart is long because, without the coarse step, the θ-mean blocks miss
+#: more of the Hessian as the shape leaves the axis and a restart throws away what GMRES
+#: learnt: at the triaxial branch's a = 0.7 predictor (n_θ = 8, 0.34M unknowns) GMRES(60)
+#: took 508 iterations (150 s), GMRES(600) 176 (53 s); 300 vectors are 0.8 GB there. With
+#: the coarse step a solve there takes 20–40 iterations
 RESTART, MAX_ITERATIONS, INEXACT = 300, 900, 1e-5
 
 
@@ -204,8 +209,10 @@ class FourierNewtonSystem(NewtonSystem):
     translation along z pinned, extra ``pins`` (linear functionals' gradients, e.g. a mode's
     amplitude) held where the start has them; solved by GMRES with the modes' blocks."""
 
-    def __init__(self, be: FourierState, linear: str = "auto", pins=()):
+    def __init__(self, be: FourierState, linear: str = "auto", pins=(),
+                 coarse_degree: int | None = None):
         self.be, self.space, self.step = be, be.space, be.stepper
+        self.coarse_degree = coarse_degree
         self.w = self.space.weights
         self.translations = [*self._translations(),
                              *[np.asarray(p, dtype=float) for p in pins]]
@@ -238,7 +245,7 @@ class FourierNewtonSystem(NewtonSystem):
         if sigma or C is not None:
             raise ModelError("the Fourier-(r, z) Newton system solves at sigma = 0 only")
         if lin.bordered is None:
-            lin.bordered = KKTSolver(self, lin)
+            lin.bordered = KKTSolver(self, lin, degree=self.coarse_degree)
         return lin.bordered
 
 
@@ -284,12 +291,16 @@ class ModeBlocks:
 class KKTSolver:
     """[[H_L − σP, C], [Cᵀ, 0]] at a linearization, by GMRES preconditioned by the same system
     with the modes' blocks for H_L (:class:`ModeBlocks`, its borders by
-    :class:`fem_ade.backends.fem.direct.Bordered`); ``solve(b, c)`` → (x, multipliers)."""
+    :class:`fem_ade.backends.fem.direct.Bordered`) after the coarse step of :class:`Galerkin`
+    on the shape functions of ``degree`` (default :data:`fem_ade.backends.fem.coarse.
+    FOURIER_DEGREE`; 0: none); ``solve(b, c)`` → (x, multipliers)."""
 
     def __init__(self, sys_: FourierNewtonSystem, lin, rtol: float = 1e-8,
-                 sigma: float = 0.0):
+                 sigma: float = 0.0, degree: int | None = None):
+        from fem_ade.backends.fem.coarse import FOURIER_DEGREE
         from fem_ade.backends.fem.direct import Bordered
 
+        degree = FOURIER_DEGREE if degree is None else degree
         t0 = time.perf_counter()
         # the linearization's fields, not the object that keeps this solver (no cycle: the
         # n_θ factorizations are freed as soon as the Newton iterate moves on; measured, with
@@ -314,6 +325,12 @@ class KKTSolver:
 
         self.prec = Bordered(blocks_solve, [b for _, b in self.rank_one],
                              [s for s, _ in self.rank_one], self.C)
+        self.coarse = None
+        if degree:
+            from fem_ade.backends.fem.coarse import fourier_shape_functions
+
+            Z = fourier_shape_functions(space, lin.phi, step.params.eps, degree)
+            self.coarse = Galerkin(Z, self.apply, self.C)
         self.setup_s = time.perf_counter() - t0
         self.iterations: list[int] = []
 
@@ -337,8 +354,11 @@ class KKTSolver:
         A = LinearOperator((N + k, N + k), matvec=self.apply, dtype=float)
 
         def prec(r):
-            x, y = self.prec.solve(r[:N], r[N:])
-            return np.concatenate([x, y])
+            if self.coarse is None:
+                return np.concatenate(self.prec.solve(r[:N], r[N:]))
+            x1, Hx1 = self.coarse.step(r[:N])
+            x, y = self.prec.solve(r[:N] - Hx1, r[N:])
+            return np.concatenate([x + x1, y])
 
         M = LinearOperator((N + k, N + k), matvec=prec, dtype=float)
         count = [0]
@@ -354,6 +374,41 @@ class KKTSolver:
                 raise ArithmeticError(f"GMRES reached {reached:.1e} in {count[0]} iterations "
                                       "on the Fourier-(r, z) Newton system")
         return x[:N], x[N:]
+
+
+class Galerkin:
+    """The coarse step of the two-level preconditioner of :class:`KKTSolver`: for the top of
+    a residual r, x₁ = Zᵀ(Z H Zᵀ)⁺ Z r and H x₁, the functions Z (k × N) first projected onto
+    the constraints' null space (Cᵀx₁ = 0: the step leaves the constraint rows' residual as
+    it is). The preconditioner is then x₁ + B(r − A x₁), B the bordered blocks' (the
+    coarse-then-fine form of a two-level method; GMRES needs no symmetry of it). ``apply``
+    is the bordered system's product (the top rows of A [z; 0] are H z, shifted where A is).
+
+    It is made again at each linearization. Its set-up (H on each of its 240 functions at
+    n_θ = 8) costs about two GMRES solves (29 s against 11 s a solve at the triaxial
+    branch's a = 1.0), but one made at another state is worth little: the a = 0.7 point's at
+    a = 1.0 took 169 iterations (26 with its own)."""
+
+    def __init__(self, Z: np.ndarray, apply, C: list):
+        C = np.array(C)
+        Z = Z - (Z @ C.T) @ np.linalg.solve(C @ C.T, C)
+        k, N = len(C), Z.shape[1]
+        self.Z = Z
+        self.HZ = np.array([apply(np.concatenate([z, np.zeros(k)]))[:N] for z in Z])
+        g, Q = np.linalg.eigh(Z @ Z.T)  # an orthonormal basis of Z's span (Z may be deficient)
+        keep = g > 1e-10 * g.max()
+        B = Q[:, keep] / np.sqrt(g[keep])
+        E = B.T @ (Z @ self.HZ.T) @ B
+        t, Y = np.linalg.eigh((E + E.T) / 2.0)
+        inv = np.zeros_like(t)
+        big = np.abs(t) > 1e-12 * np.abs(t).max()
+        inv[big] = 1.0 / t[big]
+        self.E_inverse = (B @ Y) @ (inv[:, None] * (B @ Y).T)
+        self.size, self.rank = len(Z), int(keep.sum())
+
+    def step(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        y = self.E_inverse @ (self.Z @ r)
+        return self.Z.T @ y, self.HZ.T @ y
 
 
 @dataclass
