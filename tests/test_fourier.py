@@ -239,3 +239,24 @@ def test_the_coarse_step_solves_the_same_system_in_fewer_iterations(oblate):
     x0, x4 = alone.solve(b)[0], coarse.solve(b)[0]
     assert np.linalg.norm(x4 - x0) < 1e-7 * np.linalg.norm(x0)
     assert coarse.iterations[0] <= alone.iterations[0] / 2
+
+
+def test_a_coarse_step_is_kept_while_the_field_stays_near(oblate):
+    """The Newton system keeps its coarse step for a linearization within REUSE of the φ it
+    was made at (node by node) and makes a new one beyond it; the kept one, made at another
+    state, still gives the solution of the θ-mean blocks alone (to 1e-7 relative)."""
+    from fem_ade.backends.fem.fourier import REUSE, KKTSolver
+
+    sys2 = NewtonSystem(oblate)
+    _, psi = lowest_mode(sys2, linearize(sys2, oblate.phi), 2)
+    st = FourierState.of(oblate, 2, 4, {1: 0.5 * psi})
+    sys3 = FourierNewtonSystem(st, pins=[st.space.weights * st.space.from_modes({1: psi})])
+    first = sys3.factor(linearize(sys3, st.phi)).coarse
+    near = linearize(sys3, st.phi + 0.5 * REUSE * np.sin(7 * st.space.doflocs[1]))
+    kept = sys3.factor(near)
+    assert kept.coarse is first
+    b = st.space.weights * st.space.from_modes({0: oblate.phi, 2: psi})
+    x0 = KKTSolver(sys3, near, degree=0).solve(b)[0]
+    assert np.linalg.norm(kept.solve(b)[0] - x0) < 1e-7 * np.linalg.norm(x0)
+    far = linearize(sys3, st.phi + 2 * REUSE * np.sin(7 * st.space.doflocs[1]))
+    assert sys3.factor(far).coarse is not first

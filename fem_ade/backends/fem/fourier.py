@@ -63,6 +63,9 @@ from fem_ade.model.params import ModelError
 #: took 508 iterations (150 s), GMRES(600) 176 (53 s); 300 vectors are 0.8 GB there. With
 #: the coarse step a solve there takes 20–40 iterations
 RESTART, MAX_ITERATIONS, INEXACT = 300, 900, 1e-5
+#: the coarse step (:class:`Galerkin`) is kept for the next Newton step while φ has moved
+#: less than this at every node since it was made
+REUSE = 0.05
 
 
 class FourierSpace:
@@ -213,6 +216,7 @@ class FourierNewtonSystem(NewtonSystem):
                  coarse_degree: int | None = None):
         self.be, self.space, self.step = be, be.space, be.stepper
         self.coarse_degree = coarse_degree
+        self.galerkin = None  # the coarse step in use (:class:`Galerkin`)
         self.w = self.space.weights
         self.translations = [*self._translations(),
                              *[np.asarray(p, dtype=float) for p in pins]]
@@ -245,7 +249,11 @@ class FourierNewtonSystem(NewtonSystem):
         if sigma or C is not None:
             raise ModelError("the Fourier-(r, z) Newton system solves at sigma = 0 only")
         if lin.bordered is None:
-            lin.bordered = KKTSolver(self, lin, degree=self.coarse_degree)
+            kept = self.galerkin
+            if kept is not None and np.abs(lin.phi - kept.phi).max() > REUSE:
+                kept = None
+            lin.bordered = KKTSolver(self, lin, degree=self.coarse_degree, coarse=kept)
+            self.galerkin = lin.bordered.coarse
         return lin.bordered
 
 
@@ -296,7 +304,7 @@ class KKTSolver:
     FOURIER_DEGREE`; 0: none); ``solve(b, c)`` → (x, multipliers)."""
 
     def __init__(self, sys_: FourierNewtonSystem, lin, rtol: float = 1e-8,
-                 sigma: float = 0.0, degree: int | None = None):
+                 sigma: float = 0.0, degree: int | None = None, coarse=None):
         from fem_ade.backends.fem.coarse import FOURIER_DEGREE
         from fem_ade.backends.fem.direct import Bordered
 
@@ -325,12 +333,12 @@ class KKTSolver:
 
         self.prec = Bordered(blocks_solve, [b for _, b in self.rank_one],
                              [s for s, _ in self.rank_one], self.C)
-        self.coarse = None
-        if degree:
+        self.coarse = coarse
+        if degree and coarse is None:
             from fem_ade.backends.fem.coarse import fourier_shape_functions
 
             Z = fourier_shape_functions(space, lin.phi, step.params.eps, degree)
-            self.coarse = Galerkin(Z, self.apply, self.C)
+            self.coarse = Galerkin(Z, self.apply, self.C, lin.phi)
         self.setup_s = time.perf_counter() - t0
         self.iterations: list[int] = []
 
@@ -357,7 +365,7 @@ class KKTSolver:
             if self.coarse is None:
                 return np.concatenate(self.prec.solve(r[:N], r[N:]))
             x1, Hx1 = self.coarse.step(r[:N])
-            x, y = self.prec.solve(r[:N] - Hx1, r[N:])
+            x, y = self.prec.solve(r[:N] - Hx1, r[N:] - np.array([c @ x1 for c in self.C]))
             return np.concatenate([x + x1, y])
 
         M = LinearOperator((N + k, N + k), matvec=prec, dtype=float)
@@ -384,12 +392,17 @@ class Galerkin:
     coarse-then-fine form of a two-level method; GMRES needs no symmetry of it). ``apply``
     is the bordered system's product (the top rows of A [z; 0] are H z, shifted where A is).
 
-    It is made again at each linearization. Its set-up (H on each of its 240 functions at
-    n_θ = 8) costs about two GMRES solves (29 s against 11 s a solve at the triaxial
-    branch's a = 1.0), but one made at another state is worth little: the a = 0.7 point's at
-    a = 1.0 took 169 iterations (26 with its own)."""
+    :class:`FourierNewtonSystem` keeps one for the Newton steps after the one it was made at
+    while φ stays within :data:`REUSE` of its φ (node by node): made at another state it is
+    still a fixed linear map, so GMRES converges to the same solution, only in more
+    iterations (the constraint rows' part of A x₁, C x₁, is then taken at the current
+    state). Its set-up (H on each of its 240 functions at n_θ = 8) costs about two GMRES
+    solves (29 s against 11 s a solve at the triaxial branch's a = 1.0), but one made
+    far away is worth little: the a = 0.7 point's at a = 1.0 took 169 iterations (26 with
+    its own)."""
 
-    def __init__(self, Z: np.ndarray, apply, C: list):
+    def __init__(self, Z: np.ndarray, apply, C: list, phi: np.ndarray):
+        self.phi = phi
         C = np.array(C)
         Z = Z - (Z @ C.T) @ np.linalg.solve(C @ C.T, C)
         k, N = len(C), Z.shape[1]
