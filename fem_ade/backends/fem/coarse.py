@@ -120,9 +120,13 @@ def fourier_shape_functions(space, phi: np.ndarray, eps: float,
     grads = np.array([gradient(space.rz, s) for s in S]).transpose(1, 0, 2)  # (2, n_θ, N_rz)
     X = np.broadcast_to(space.rz.doflocs[:, None, :], grads.shape)
     cosines = np.cos(np.outer(space.m, space.theta))[:, :, None]  # (j, angle, 1)
-    return np.array([space.from_slices(p * g * c)
-                     for p in _polynomials(X, S, grads, eps, degree)
-                     for c in cosines for g in grads])
+    Z = np.empty((math.comb(degree + 2, 2) * len(cosines) * 2, phi.size))
+    rows = iter(Z)
+    for p in _polynomials(X, S, grads, eps, degree):
+        for c in cosines:
+            for g in grads:
+                next(rows)[:] = space.from_slices(p * g * c)
+    return Z
 
 
 def _polynomials(X: np.ndarray, phi: np.ndarray, grads: np.ndarray, eps: float,

@@ -251,7 +251,7 @@ class FourierNewtonSystem(NewtonSystem):
         if lin.bordered is None:
             kept = self.galerkin
             if kept is not None and np.abs(lin.phi - kept.phi).max() > REUSE:
-                kept = None
+                kept = self.galerkin = None  # gone before the next is made (GBs at n_θ = 16)
             lin.bordered = KKTSolver(self, lin, degree=self.coarse_degree, coarse=kept)
             self.galerkin = lin.bordered.coarse
         return lin.bordered
@@ -404,10 +404,11 @@ class Galerkin:
     def __init__(self, Z: np.ndarray, apply, C: list, phi: np.ndarray):
         self.phi = phi
         C = np.array(C)
-        Z = Z - (Z @ C.T) @ np.linalg.solve(C @ C.T, C)
+        Z -= (Z @ C.T) @ np.linalg.solve(C @ C.T, C)  # in place: Z is 2.6 GB at n_θ = 16
         k, N = len(C), Z.shape[1]
-        self.Z = Z
-        self.HZ = np.array([apply(np.concatenate([z, np.zeros(k)]))[:N] for z in Z])
+        self.Z, self.HZ = Z, np.empty_like(Z)
+        for z, hz in zip(Z, self.HZ, strict=True):
+            hz[:] = apply(np.concatenate([z, np.zeros(k)]))[:N]
         g, Q = np.linalg.eigh(Z @ Z.T)  # an orthonormal basis of Z's span (Z may be deficient)
         keep = g > 1e-10 * g.max()
         B = Q[:, keep] / np.sqrt(g[keep])
