@@ -23,8 +23,8 @@ window, and lies below both there: the window's lowest shape is a triaxial ellip
 **Control**: the branch's Δa₀ as a → 0 is the oblate's bifurcation as the (r, z) blocks
 locate it, and its e there is the oblate's.
 
-    python studies/triaxial.py --out studies/results   # ~3.5 h on one core (the notes)
-    python studies/triaxial.py --quick                 # the ε = 0.04 oblate, ~25 s
+    python studies/triaxial.py --out studies/results   # hours on one core (the notes)
+    python studies/triaxial.py --quick                 # the ε = 0.04 oblate, ~17 s
 """
 
 from __future__ import annotations
@@ -42,15 +42,15 @@ OUT = Path("runs") / "studies"
 V, KBAR, R0, EPS, N = 0.7, 1.4, 0.195, 0.01, 400
 #: the lines: (branch, Δa₀ from, to, step)
 LINES = (("oblate", 1.08, 1.10, 0.01), ("prolate", 1.08, 1.10, 0.01))
-#: the branch's amplitudes (max |ψ| = 1; φ's range is 2): the next, 1.3, converged on
-#: n_θ = 8 but its top cosine (3.2e-3 of the first) asked for n_θ = 16, stopped (the notes)
-AMPLITUDES = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0)
+#: the branch's amplitudes (max |ψ| = 1; φ's range is 2); 1.3 and 1.6 on n_θ = 16 (on 8,
+#: 1.3's top cosine was 3.2e-3 of the first)
+AMPLITUDES = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.3, 1.6)
 #: the branch born at the prolate's m = 2 bifurcation (the window's other end), in the
 #: prolate's own frame: its first amplitudes
 PROLATE_AMPLITUDES = (0.05, 0.1, 0.2, 0.4)
 #: the points whose stability in the sector (the fields with the mirror planes x = 0, y = 0:
 #: cos 2jθ) is computed (their amplitudes), and the eigenvalues nearest SIGMA found
-STABILITY, SIGMA, K_LOWEST = (0.05,), -2e-6, 3
+STABILITY, SIGMA, K_LOWEST = (0.05, 1.0), -2e-6, 3
 #: the quick mode: the oblate at ε = 0.04, v = 0.85, R₀ = 0.25 (unstable in m = 2), two
 #: amplitudes, in v
 QUICK = {"v": 0.85, "eps": 0.04, "R0": 0.25, "amplitudes": (0.1, 0.2)}
@@ -313,6 +313,26 @@ def _birth_line(pts: list[dict], param: str, located: list[dict]) -> list[str]:
             f"{side} in {param}); the (r, z) blocks located it at {where}."]
 
 
+def _crossing(pts: list[dict], param: str, lines: list[dict]) -> list[str]:
+    """Where the oblate's branch passes the prolate's m = 2 bifurcation, between two
+    computed points (a linear interpolation in a), or that it has not yet."""
+    far = [b[param] for ln in lines[1:] for b in ln.get("bifurcations", [])]
+    if not far or not pts:
+        return []
+    x_p, near = far[0], [b[param] for b in lines[0].get("bifurcations", [])]
+    rows = sorted((x["amplitude"], x[param]) for x in pts)
+    done = f" ({100 * (rows[-1][1] - near[0]) / (x_p - near[0]):.0f} % of the window)" \
+        if near else ""
+    for (a0, p0), (a1, p1) in zip(rows, rows[1:], strict=False):
+        if p0 < x_p <= p1:
+            a = a0 + (a1 - a0) * (x_p - p0) / (p1 - p0)
+            return ["", f"It passes the prolate's bifurcation ({param} = {x_p:.7f}) between "
+                    f"a = {a0:g} and {a1:g} (a ≈ {a:.2f}, linear between the two): it spans "
+                    "the window, computed."]
+    return ["", f"It has not reached the prolate's bifurcation ({param} = {x_p:.7f}) at its "
+            f"last point, a = {rows[-1][0]:g}, {param} = {rows[-1][1]:.7f}{done}."]
+
+
 def _stability(pts: list[dict]) -> list[str]:
     stab = [x for x in pts if "lowest" in x]
     if not stab:
@@ -353,6 +373,7 @@ def report(result: dict, out: Path, suffix: str) -> None:
     lines += ["", "## The branch born at the oblate's m = 2 bifurcation", ""]
     lines += _branch_table(pts, param)
     lines += _birth_line(pts, param, result["lines"][0].get("bifurcations", []))
+    lines += _crossing(pts, param, result["lines"])
     lines += _stability(pts)
     if result.get("prolate_points"):
         lines += ["", "## The branch born at the prolate's m = 2 bifurcation", "",
