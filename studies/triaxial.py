@@ -42,9 +42,9 @@ OUT = Path("runs") / "studies"
 V, KBAR, R0, EPS, N = 0.7, 1.4, 0.195, 0.01, 400
 #: the lines: (branch, Δa₀ from, to, step)
 LINES = (("oblate", 1.08, 1.10, 0.01), ("prolate", 1.08, 1.10, 0.01))
-#: the branch's amplitudes (max |ψ| = 1; φ's range is 2); 1.3 and 1.6 on n_θ = 16 (on 8,
+#: the branch's amplitudes (max |ψ| = 1; φ's range is 2); 1.3, 1.6, 1.9 on n_θ = 16 (on 8,
 #: 1.3's top cosine was 3.2e-3 of the first)
-AMPLITUDES = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.3, 1.6)
+AMPLITUDES = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.3, 1.6, 1.9)
 #: the branch born at the prolate's m = 2 bifurcation (the window's other end), in the
 #: prolate's own frame: its first amplitudes
 PROLATE_AMPLITUDES = (0.05, 0.1, 0.2, 0.4)
