@@ -158,6 +158,14 @@ def _polynomials(X: np.ndarray, phi: np.ndarray, grads: np.ndarray, eps: float,
             yield p
 
 
+def independent_basis(G: np.ndarray) -> np.ndarray:
+    """B with Bᵀ G B = I spanning the functions whose Gram matrix is ``G`` (k × k), the
+    directions of G's eigenvalues below 1e-10 of its largest dropped (dependent functions)."""
+    g, Q = np.linalg.eigh(G)
+    keep = g > 1e-10 * g.max()
+    return Q[:, keep] / np.sqrt(g[keep])
+
+
 def hessian(space, ke: float, co: dict, z: np.ndarray) -> np.ndarray:
     """H z for a stack z (k × N), H = κε K W⁻¹K + K diag(α) + diag(α) K + W diag(γ) + c₀ K +
     Σ σᵢ bᵢbᵢᵀ from its coefficients ``co`` (:meth:`fem_ade.backends.fem.step.MixedStep.
@@ -201,11 +209,9 @@ class CoarseSpace:
             KZ[i:i + CHUNK] = w * space.laplacian(Z[i:i + CHUNK])
         G, A = self._grams(Z, KZ, w, (a, c, ke), co)
         del KZ
-        g, Q = np.linalg.eigh(G)
-        keep = g > 1e-10 * g.max()
-        B = Q[:, keep] / np.sqrt(g[keep])
+        B = independent_basis(G)
         theta, Y = np.linalg.eigh(B.T @ A @ B)
-        self.theta, self.rank = theta, int(keep.sum())
+        self.theta, self.rank = theta, B.shape[1]
         chosen = np.abs(theta) < cut
         self.V = (B @ Y[:, chosen]).T @ Z
         self.d = 1.0 / np.maximum(np.abs(theta[chosen]), FLOOR) - 1.0

@@ -305,7 +305,7 @@ class KKTSolver:
 
     def __init__(self, sys_: FourierNewtonSystem, lin, rtol: float = 1e-8,
                  sigma: float = 0.0, degree: int | None = None, coarse=None):
-        from fem_ade.backends.fem.coarse import FOURIER_DEGREE
+        from fem_ade.backends.fem.coarse import FOURIER_DEGREE, fourier_shape_functions
         from fem_ade.backends.fem.direct import Bordered
 
         degree = FOURIER_DEGREE if degree is None else degree
@@ -335,8 +335,6 @@ class KKTSolver:
                              [s for s, _ in self.rank_one], self.C)
         self.coarse = coarse
         if degree and coarse is None:
-            from fem_ade.backends.fem.coarse import fourier_shape_functions
-
             Z = fourier_shape_functions(space, lin.phi, step.params.eps, degree)
             self.coarse = Galerkin(Z, self.apply, self.C, lin.phi)
         self.setup_s = time.perf_counter() - t0
@@ -402,6 +400,8 @@ class Galerkin:
     its own)."""
 
     def __init__(self, Z: np.ndarray, apply, C: list, phi: np.ndarray):
+        from fem_ade.backends.fem.coarse import independent_basis
+
         self.phi = phi
         C = np.array(C)
         Z -= (Z @ C.T) @ np.linalg.solve(C @ C.T, C)  # in place: Z is 2.6 GB at n_θ = 16
@@ -409,16 +409,13 @@ class Galerkin:
         self.Z, self.HZ = Z, np.empty_like(Z)
         for z, hz in zip(Z, self.HZ, strict=True):
             hz[:] = apply(np.concatenate([z, np.zeros(k)]))[:N]
-        g, Q = np.linalg.eigh(Z @ Z.T)  # an orthonormal basis of Z's span (Z may be deficient)
-        keep = g > 1e-10 * g.max()
-        B = Q[:, keep] / np.sqrt(g[keep])
+        B = independent_basis(Z @ Z.T)  # an orthonormal basis of Z's span (Z may be deficient)
         E = B.T @ (Z @ self.HZ.T) @ B
         t, Y = np.linalg.eigh((E + E.T) / 2.0)
         inv = np.zeros_like(t)
         big = np.abs(t) > 1e-12 * np.abs(t).max()
         inv[big] = 1.0 / t[big]
         self.E_inverse = (B @ Y) @ (inv[:, None] * (B @ Y).T)
-        self.size, self.rank = len(Z), int(keep.sum())
 
     def step(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         y = self.E_inverse @ (self.Z @ r)
