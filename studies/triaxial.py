@@ -14,7 +14,9 @@ m = 2 below 1.0957: between them no axisymmetric shape is stable. The octant at 
   Fourier–(r, z) geometry with fold m₀ = 2 (cosines of 2jθ: the mirror planes x = 0, y = 0)
   and its amplitude a as the parameter (:mod:`fem_ade.campaigns.fourier_branch`): at each
   a the Δa₀ where the pinned state is steady, n_θ doubled until the highest cosine is below
-  1e-3 of the first.
+  1e-3 of the first. **Then Δa₀ held** (``HELD``), the amplitude free (natural
+  continuation, Newton with its line search: the branch's stable part), where the
+  amplitude's first cosine saturates and Δa₀(a) steepens.
 - **Beside it**: the (r, z) oblate and prolate made steady at each point's Δa₀ (Newton from
   the lines' nearest point), their e against the branch's.
 
@@ -45,6 +47,9 @@ LINES = (("oblate", 1.08, 1.10, 0.01), ("prolate", 1.08, 1.10, 0.01))
 #: the branch's amplitudes (max |ψ| = 1; φ's range is 2); 1.3, 1.6, 1.9 on n_θ = 16 (on 8,
 #: 1.3's top cosine was 3.2e-3 of the first)
 AMPLITUDES = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.3, 1.6, 1.9)
+#: then Δa₀ held, the amplitude free (natural continuation: the first cosine saturates, 0.85 …
+#: 1.20 at a = 1.0 … 1.9, while Δa₀ rises ever faster)
+HELD = (1.103, 1.107)
 #: the branch born at the prolate's m = 2 bifurcation (the window's other end), in the
 #: prolate's own frame: its first amplitudes
 PROLATE_AMPLITUDES = (0.05, 0.1, 0.2, 0.4)
@@ -104,7 +109,7 @@ def axisymmetric_e(folder: Path, param: str, value: float) -> float | None:
 
 
 def run_branch(root: Path, line: dict, param: str, amplitudes,
-               name: str = "branch") -> list[dict]:
+               name: str = "branch", held=()) -> list[dict]:
     """The m = 2 branch from the line's last point (:func:`fem_ade.campaigns.fourier_branch.
     follow`), born where the line's blocks located it (else at the point), kept in
     ``root/name``."""
@@ -119,7 +124,7 @@ def run_branch(root: Path, line: dict, param: str, amplitudes,
     _, psi = lowest_mode(sys_, linearize(sys_, be.phi), 2)
     birth = line["bifurcations"][0][param] if line["bifurcations"] else None
     return follow(be, psi, amplitudes, root / name, m0=2, param=param, p_birth=birth,
-                  quiet=False)
+                  quiet=False, held=held)
 
 
 def sector_lowest(root: Path, line: dict, k: int, row: dict, param: str,
@@ -156,7 +161,7 @@ def compute(root: Path, quick: bool) -> dict:
         line, param, amplitudes = lines[0], "da0", AMPLITUDES
     if line["failed"]:
         return {"lines": lines, "points": []}
-    points = run_branch(root, line, param, amplitudes)
+    points = run_branch(root, line, param, amplitudes, held=() if quick else HELD)
     for k, x in enumerate(points):
         if not quick and x["amplitude"] in STABILITY:
             x["lowest"] = sector_lowest(root, line, k, x, param)

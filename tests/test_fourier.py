@@ -260,3 +260,30 @@ def test_a_coarse_step_is_kept_while_the_field_stays_near(oblate):
     assert np.linalg.norm(kept.solve(b)[0] - x0) < 1e-7 * np.linalg.norm(x0)
     far = linearize(sys3, st.phi + 2 * REUSE * np.sin(7 * st.space.doflocs[1]))
     assert sys3.factor(far).coarse is not first
+
+
+def test_a_point_at_a_held_parameter_reads_on_from_the_amplitudes(oblate_line, tmp_path):
+    """Three points of the m = 2 branch by amplitude, then one with v held at the third's
+    value and the amplitude free (natural continuation): its start is the third point's
+    field exactly (the predictor's weights are 0, 0, 1), which is steady without the pin,
+    so Newton takes no step and the point is the third (its amplitude and e); the three are
+    read back from the folder, not made again. Held values that are not monotone are
+    refused."""
+    from fem_ade.campaigns.fourier_branch import follow
+
+    be, _ = load_state(oblate_line / "points" / "0001")
+    sys2 = NewtonSystem(be)
+    _, psi = lowest_mode(sys2, linearize(sys2, be.phi), 2)
+    amplitudes = (0.1, 0.15, 0.2)
+    pts = follow(be, psi, amplitudes, tmp_path, m0=2, param="v")
+    assert [x["method"] for x in pts] == ["bordered"] * 3
+    made = (tmp_path / "0002.json").stat().st_mtime_ns
+    more = follow(be, psi, amplitudes, tmp_path, m0=2, param="v", held=(pts[2]["v"],))
+    assert (tmp_path / "0002.json").stat().st_mtime_ns == made  # read back
+    held = more[3]
+    assert held["method"] == "held" and held["solves"] == 0 and held["lam_pin"] is None
+    assert held["v"] == pts[2]["v"]
+    assert held["amplitude"] == pytest.approx(0.2, rel=1e-9)
+    assert held["e"] == pytest.approx(pts[2]["e"], abs=1e-12)
+    with pytest.raises(ModelError, match="monotone"):
+        follow(be, psi, amplitudes, tmp_path, m0=2, param="v", held=(0.8, 0.81, 0.8))

@@ -19,7 +19,9 @@ third from the line through the last two points (φ and p), later ones from the 
 through the last three, φ's taken in artanh φ (:func:`_extrapolate`).
 
 n_θ is doubled (the field carried over by its cosines) while the highest cosine's largest
-value exceeds :data:`TAIL` of the first's: the angles resolve the shape.
+value exceeds :data:`TAIL` of the first's: the angles resolve the shape. Where the amplitude
+stops serving as the parameter, the branch goes on with p held and the amplitude free
+(:meth:`AmplitudeBranch.point_held`: the stable part of a branch, up to a fold in p).
 """
 
 from __future__ import annotations
@@ -262,6 +264,47 @@ class AmplitudeBranch:
                       flush=True)
         return self._record(a, x1, f1, res, modes, tail, (used, steps), t0, c0)
 
+    def point_held(self, p: float) -> dict:
+        """The branch's point at the parameter ``p`` held and the amplitude free (the point's
+        amplitude is then its field's): natural continuation, for where the amplitude stops
+        serving as the branch's parameter (the first cosine saturates as the interface
+        reaches φ's range: 0.85, 1.01, 1.12, 1.20 on the triaxial branch at a = 1.0 … 1.9,
+        while Δa₀ rose ever faster). The start: the polynomial in p through the last three
+        points (their fields in artanh φ, :func:`_extrapolate`); then Newton with its line
+        search on the system without the amplitude's pin, which finds the branch's state
+        where that is a minimum in the sector (a stable part of the branch), n_θ doubled as
+        in :meth:`point`. A fold in p ahead is not passed: Newton then ends elsewhere (the
+        amplitude says where), or fails (:class:`fem_ade.backends.fem.newton.NewtonError`)."""
+        from fem_ade.backends.fem.fourier import FourierNewtonSystem
+        from fem_ade.backends.fem.newton import NewtonError, solve_steady
+
+        t0, c0 = time.perf_counter(), time.process_time()
+        pts = self.points
+        if len(pts) < 3:
+            raise ModelError(f"a point at {self.param} held needs three points before it, "
+                             f"got {len(pts)}")
+        c = _lagrange([x[self.param] for x in pts[-3:]], p)
+        space, n = self.state.space, self.state.space.n_theta
+        fields = [space.from_modes(dict(enumerate(_pad(f, n)))) for f in self._fields[-3:]]
+        self.state.phi = _extrapolate(fields, c)
+        self.system.galerkin = None  # the pinned system's coarse step: GBs at n_θ = 16
+        while True:
+            self.state.set_parameter(self.param, p)
+            res = solve_steady(self.state, system=FourierNewtonSystem(self.state),
+                               quiet=self.quiet)
+            if not res.converged:
+                raise NewtonError(f"Newton at {self.param} = {p:.8g} held: {res.message}")
+            modes = self.state.space.modes(self.state.phi)
+            tail = float(np.abs(modes[-1]).max() / np.abs(modes[1]).max())
+            if tail <= TAIL:
+                break
+            self._resize(2 * self.state.space.n_theta, modes)
+            if not self.quiet:
+                print(f"  {self.param} = {p:g}: top cosine {tail:.1e} of the first, n_theta "
+                      f"{self.state.space.n_theta}", flush=True)
+        return self._record(self.amplitude(self.state.phi), p, None, res, modes, tail,
+                            ("held", res.iterations), t0, c0)
+
     def _secant(self, x0: float, x1: float, f0: float):
         """The secant on the pin's multiplier from parameters x0 (its multiplier f0, the
         state steady there) and x1: (p, multiplier, Newton's last result, solves)."""
@@ -328,19 +371,24 @@ def _pad(modes: np.ndarray, n: int) -> np.ndarray:
 
 def follow(be, psi, amplitudes, out: Path, *, m0: int, param: str = "da0",
            n_theta: int = 4, p_birth: float | None = None, quiet: bool = True,
-           method: str = "bordered") -> list[dict]:
-    """The branch's points at ``amplitudes`` (increasing), each kept in ``out`` as
-    ``NNNN.json`` with its cosines in ``NNNN.npz``; a point already there is read back (with
-    its field, so the next predictor is the same), so a stopped run goes on."""
-    amplitudes = [float(a) for a in amplitudes]
+           method: str = "bordered", held=()) -> list[dict]:
+    """The branch's points at ``amplitudes`` (increasing), then at the parameter values
+    ``held`` (monotone, the amplitude free: :meth:`AmplitudeBranch.point_held`), each kept in
+    ``out`` as ``NNNN.json`` with its cosines in ``NNNN.npz``; a point already there is read
+    back (with its field, so the next predictor is the same), so a stopped run goes on."""
+    amplitudes, held = [float(a) for a in amplitudes], [float(p) for p in held]
     if not amplitudes or any(not math.isfinite(a) or a <= 0 for a in amplitudes) or \
             any(b <= a for a, b in zip(amplitudes, amplitudes[1:], strict=False)):
         raise ModelError(f"amplitudes are positive and increasing, got {amplitudes}")
+    steps = np.diff(held)
+    if not all(math.isfinite(p) for p in held) or (
+            steps.size and not (np.all(steps > 0) or np.all(steps < 0))):
+        raise ModelError(f"the held {param} values are monotone, got {held}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     branch = AmplitudeBranch(be, psi, m0=m0, param=param, n_theta=n_theta, p_birth=p_birth,
                              quiet=quiet, method=method)
-    for k, a in enumerate(amplitudes):
+    for k, a in enumerate([*amplitudes, *held]):
         done, field = out / f"{k:04d}.json", out / f"{k:04d}.npz"
         if done.is_file() and field.is_file():
             row = json.loads(done.read_text())
@@ -351,7 +399,7 @@ def follow(be, psi, amplitudes, out: Path, *, m0: int, param: str = "da0",
             branch.points.append(row)
             branch._fields.append(modes)
             continue
-        row = branch.point(a)
+        row = branch.point(a) if k < len(amplitudes) else branch.point_held(a)
         np.savez_compressed(field.with_suffix(".tmp.npz"), cosines=branch._fields[-1])
         field.with_suffix(".tmp.npz").replace(field)
         write_json_atomic(done, row, indent=1)
