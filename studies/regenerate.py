@@ -52,6 +52,7 @@ STEPS = (
     ("ade_octant", ["studies/ade_octant.py", "--out", RESULTS]),
     ("triaxial", ["studies/triaxial.py", "--out", RESULTS]),
     ("newton3d_bench", ["studies/newton3d_bench.py", "--out", RESULTS]),
+    ("fourier_bench", ["studies/fourier_bench.py", "--out", RESULTS]),
     ("nonaxisymmetric", ["studies/nonaxisymmetric.py", "--out", RESULTS, "--eps", "0.02"]),
     ("sweep_scaling", ["studies/sweep_scaling.py", "--out", RESULTS]),
     ("phase_diagram", ["studies/phase_diagram.py", "--out", RESULTS]),
@@ -107,6 +108,8 @@ MEASUREMENTS = {"convergence": "errors and times of each resolution, in one proc
                                    "another in one process",
                 "newton3d_bench": "one 3D steady state by Newton with and without its pins, "
                                   "CPU seconds in one process",
+                "fourier_bench": "one Fourier-(r, z) solve and Newton with and without the "
+                                 "coarse step, CPU seconds in one process",
                 "ade_octant": "each state's (r, z) point, then its two 3D octant runs in a "
                               "process pool (runs from switched starts, with their CPU "
                               "seconds)",
