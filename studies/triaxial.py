@@ -49,7 +49,7 @@ LINES = (("oblate", 1.08, 1.10, 0.01), ("prolate", 1.08, 1.10, 0.01))
 AMPLITUDES = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.3, 1.6, 1.9)
 #: then Δa₀ held, the amplitude free (natural continuation: the first cosine saturates, 0.85 …
 #: 1.20 at a = 1.0 … 1.9, while Δa₀ rises ever faster)
-HELD = (1.103, 1.107)
+HELD = (1.103, 1.107, 1.112)
 #: the branch born at the prolate's m = 2 bifurcation (the window's other end), in the
 #: prolate's own frame: its first amplitudes
 PROLATE_AMPLITUDES = (0.05, 0.1, 0.2, 0.4)
