@@ -27,7 +27,7 @@ measures only).
 
 from __future__ import annotations
 
-from _lib.cli import one_thread, study_parser
+from _lib.cli import one_thread, results, study_parser
 
 one_thread()
 
@@ -116,10 +116,12 @@ def newton(st, pin, degree) -> dict:
 
 
 def main(argv=None) -> dict:
-    from fem_ade.store.output import write_json_atomic
-
     ap = study_parser(__doc__, OUT, quick="the oblate at eps = 0.04 on 4 angles: seconds")
     args = ap.parse_args(argv)
+    return results(args, "fourier_bench", lambda: compute(args))
+
+
+def compute(args) -> dict:
     st, pin, result = start(args.out / "fourier_bench", args.quick)
     print(f"eps = {result['eps']:g}: {result['rz_nodes']} (r, z) nodes x {result['n_theta']}"
           f" angles = {result['unknowns']} unknowns, kicked by {KICK:g} psi cos 2theta",
@@ -143,9 +145,6 @@ def main(argv=None) -> dict:
           f"{r['solve_made']}x the CPU (coarse step made for it), {r['solve_kept']}x (kept); "
           f"Newton {r['newton']}x the CPU; solutions differ by "
           f"{solve['solutions_differ']:.1e}, Newton's E by {result['newton_E_differ']:.1e}")
-    name = "fourier_bench_quick.json" if args.quick else "fourier_bench.json"
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(args.out / name, result)
     return result
 
 

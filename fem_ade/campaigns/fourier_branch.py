@@ -218,13 +218,26 @@ class AmplitudeBranch:
                                    else FIRST_STEP)
         k = 2 if plain else min(len(pts), 3)  # the line through two points, the parabola
         c = _lagrange([x["amplitude"] for x in pts[-k:]], a)
-        space, n = self.state.space, self.state.space.n_theta
-        fields = [space.from_modes(dict(enumerate(_pad(f, n)))) for f in self._fields[-k:]]
-        self.state.phi = c @ np.array(fields) if plain else _extrapolate(fields, c)
+        self.state.phi = self._extrapolated(c, plain)
         self.state.phi += (a - self.amplitude(self.state.phi)) * self.P
         p = [x[self.param] for x in pts[-k:]]
         guess = float(np.dot(c, p))
         return guess, guess + 0.05 * (p[-1] - p[-2])
+
+    def _extrapolated(self, c: np.ndarray, plain: bool = False) -> np.ndarray:
+        """Σ cᵢ φᵢ over the last len(c) points' fields on the current n_θ, taken in artanh φ
+        (:func:`_extrapolate`), or blended in φ with ``plain``."""
+        space, n = self.state.space, self.state.space.n_theta
+        fields = [space.from_modes(dict(enumerate(_pad(f, n))))
+                  for f in self._fields[-len(c):]]
+        return c @ np.array(fields) if plain else _extrapolate(fields, c)
+
+    def _resolved(self) -> tuple[np.ndarray, float, bool]:
+        """(the field's cosines, the top one's largest value over the first's, whether the
+        angles resolve it: the tail within :data:`TAIL`, or n_θ at :data:`MAX_N_THETA`)."""
+        modes = self.state.space.modes(self.state.phi)
+        tail = float(np.abs(modes[-1]).max() / np.abs(modes[1]).max())
+        return modes, tail, tail <= TAIL or self.state.space.n_theta >= MAX_N_THETA
 
     def point(self, a: float) -> dict:
         """The branch's point at amplitude ``a`` (n_θ doubled as :data:`TAIL` says)."""
@@ -252,9 +265,8 @@ class AmplitudeBranch:
                     self.state.phi = pinned
             if used == "secant":
                 x1, f1, res, steps = self._secant(x0, x1, f0)
-            modes = self.state.space.modes(self.state.phi)
-            tail = float(np.abs(modes[-1]).max() / np.abs(modes[1]).max())
-            if tail <= TAIL or self.state.space.n_theta >= MAX_N_THETA:
+            modes, tail, resolved = self._resolved()
+            if resolved:
                 break
             n = 2 * self.state.space.n_theta
             # from the point found on n_θ angles, not the predictor again: at the triaxial
@@ -286,10 +298,7 @@ class AmplitudeBranch:
         if len(pts) < 3:
             raise ModelError(f"a point at {self.param} held needs three points before it, "
                              f"got {len(pts)}")
-        c = _lagrange([x[self.param] for x in pts[-3:]], p)
-        space, n = self.state.space, self.state.space.n_theta
-        fields = [space.from_modes(dict(enumerate(_pad(f, n)))) for f in self._fields[-3:]]
-        self.state.phi = _extrapolate(fields, c)
+        self.state.phi = self._extrapolated(_lagrange([x[self.param] for x in pts[-3:]], p))
         self.system.galerkin = None  # the pinned system's coarse step: GBs at n_θ = 16
         while True:
             self.state.set_parameter(self.param, p)
@@ -297,9 +306,8 @@ class AmplitudeBranch:
                                quiet=self.quiet)
             if not res.converged:
                 raise NewtonError(f"Newton at {self.param} = {p:.8g} held: {res.message}")
-            modes = self.state.space.modes(self.state.phi)
-            tail = float(np.abs(modes[-1]).max() / np.abs(modes[1]).max())
-            if tail <= TAIL or self.state.space.n_theta >= MAX_N_THETA:
+            modes, tail, resolved = self._resolved()
+            if resolved:
                 break
             self._resize(2 * self.state.space.n_theta, modes)
             if not self.quiet:
